@@ -1,0 +1,1 @@
+"""Benchmark groups: one module per group, each with ``run() -> {key: {"value", "unit"}}``."""
