@@ -1,0 +1,50 @@
+"""Flow backends by name: ``make_flow_backend("dis", preset="fast")``.
+
+Backends are imported lazily so that choosing DIS never imports torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+
+from companion.flow.base import FlowBackend
+
+# name -> "module:factory"; a factory takes keyword options and returns a FlowBackend.
+_BACKENDS: dict[str, str] = {
+    "dis": "companion.flow.opencv_flow:DisBackend",
+    "farneback": "companion.flow.opencv_flow:FarnebackBackend",
+    "raft": "companion.flow.raft.backend:RaftBackend",
+    "groundtruth": "companion.flow.groundtruth:GroundTruthBackend",
+}
+_FACTORIES: dict[str, Callable[..., FlowBackend]] = {}
+
+
+def register_flow_backend(name: str, factory: Callable[..., FlowBackend] | str) -> None:
+    """Register a backend factory (a callable, or a lazy ``"module:attr"`` string) under ``name``."""
+    if isinstance(factory, str):
+        _BACKENDS[name] = factory
+        _FACTORIES.pop(name, None)
+    else:
+        _FACTORIES[name] = factory
+
+
+def available_backends() -> list[str]:
+    """Names that ``make_flow_backend`` accepts."""
+    return sorted(set(_BACKENDS) | set(_FACTORIES))
+
+
+def _factory(name: str) -> Callable[..., FlowBackend]:
+    if name in _FACTORIES:
+        return _FACTORIES[name]
+    if name not in _BACKENDS:
+        raise KeyError(f"unknown flow backend {name!r}; choose from {available_backends()}")
+    module_name, attr = _BACKENDS[name].split(":")
+    factory = getattr(importlib.import_module(module_name), attr)
+    _FACTORIES[name] = factory
+    return factory
+
+
+def make_flow_backend(name: str, **options) -> FlowBackend:
+    """Build the backend registered as ``name`` with its keyword ``options``."""
+    return _factory(name)(**options)

@@ -1,0 +1,275 @@
+"""Gap detection: from dense flow to a gap mask and centroid.
+
+Two detectors share one result type, :class:`GapDetection`:
+
+- :func:`detect_gap` is the paper's pipeline (DESIGN.md step 3, paper II.C): colour the flow with the
+  Middlebury wheel → BGR image → grey → Gaussian blur 5×5 → Canny(10, 40) → morphological closing 3×3 ×3 →
+  external contours → keep 0.001·HW ≤ area ≤ 0.9·HW → largest → centroid from moments → filled mask.
+- :func:`detect_gap_parallax` is ours: it works on the flow *vectors*, not on colour grey levels that
+  depend on flow direction.  For a camera that translates (no rotation), the flow at a pixel is
+  ``F = ρ·g(x, y; t)`` with ρ = 1/Z the inverse depth and g known from the intrinsics and the translation
+  direction t (estimated from the flow by least squares when not given).  ρ = F·g/|g|² is computed where
+  |g| is large enough (away from the focus of expansion), filled elsewhere, smoothed, and Otsu-thresholded:
+  the far (low-ρ) region seen through the opening is the gap.  The largest far connected component that is
+  inside the size bounds, with holes filled, is the mask.
+
+Both take an H×W×2 float flow (u right, v down, pixels) and return a frozen :class:`GapDetection`.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from companion.flow.colour import flow_to_colour
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class GapDetection:
+    """A gap detector's answer for one frame.
+
+    ``mask``: H×W bool, True inside the gap (all False when none).  ``centroid``: (u, v) pixels or None.
+    ``area``: contour area in pixels² (0 when none).  ``contour``: N×2 int32 (x, y) polygon or None.
+    ``reason``: why there is no gap (None when there is one).  ``detector``: which detector answered.
+    """
+
+    mask: np.ndarray
+    centroid: tuple[float, float] | None
+    area: float
+    contour: np.ndarray | None
+    reason: str | None = None
+    detector: str = ""
+
+    @property
+    def found(self) -> bool:
+        return self.centroid is not None
+
+    @property
+    def area_fraction(self) -> float:
+        return self.area / float(self.mask.size) if self.mask.size else 0.0
+
+
+def _no_gap(shape: tuple[int, int], reason: str, detector: str) -> GapDetection:
+    return GapDetection(np.zeros(shape, dtype=bool), None, 0.0, None, reason, detector)
+
+
+def _from_contour(shape: tuple[int, int], contour: np.ndarray, detector: str) -> GapDetection:
+    mask = np.zeros(shape, dtype=np.uint8)
+    cv2.drawContours(mask, [contour], -1, 1, thickness=cv2.FILLED)
+    m = cv2.moments(contour)
+    if abs(m["m00"]) > 1e-9:
+        centroid = (m["m10"] / m["m00"], m["m01"] / m["m00"])
+    else:  # degenerate polygon: fall back to the filled mask's moments
+        mm = cv2.moments(mask, binaryImage=True)
+        centroid = (mm["m10"] / mm["m00"], mm["m01"] / mm["m00"])
+    polygon = contour.reshape(-1, 2).astype(np.int32)
+    return GapDetection(mask.astype(bool), (float(centroid[0]), float(centroid[1])),
+                        float(cv2.contourArea(contour)), polygon, None, detector)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The paper's detector
+# ----------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class GapDetectorConfig:
+    """Constants of the paper's detector (II.C), with its defaults."""
+
+    blur_ksize: int = 5               # Gaussian kernel, 5×5; sigma derived by OpenCV from the size (sigma=0)
+    blur_sigma: float = 0.0
+    canny_low: float = 10.0           # τ_low, 8-bit units
+    canny_high: float = 40.0          # τ_high
+    close_ksize: int = 3              # structuring element K, 3×3 rectangle
+    close_iterations: int = 3
+    area_min_frac: float = 0.001      # α_min
+    area_max_frac: float = 0.9        # α_max
+
+
+def detect_gap_in_colour(flow_bgr: np.ndarray, config: GapDetectorConfig = GapDetectorConfig(),
+                         *, detector: str = "paper") -> GapDetection:
+    """Run steps 3a–3e on a flow colour image given in **BGR** channel order (H×W×3 uint8)."""
+    if flow_bgr.ndim != 3 or flow_bgr.shape[2] != 3 or flow_bgr.dtype != np.uint8:
+        raise ValueError(f"expected an H×W×3 uint8 BGR image, got {flow_bgr.shape} {flow_bgr.dtype}")
+    h, w = flow_bgr.shape[:2]
+    grey = cv2.cvtColor(flow_bgr, cv2.COLOR_BGR2GRAY)
+    grey = cv2.GaussianBlur(grey, (config.blur_ksize, config.blur_ksize), config.blur_sigma)
+    edges = cv2.Canny(grey, config.canny_low, config.canny_high)
+    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (config.close_ksize, config.close_ksize))
+    closed = cv2.morphologyEx(edges, cv2.MORPH_CLOSE, kernel, iterations=config.close_iterations)
+    contours, _ = cv2.findContours(closed, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    if not contours:
+        return _no_gap((h, w), "no contours in the edge map", detector)
+    a_min, a_max = config.area_min_frac * h * w, config.area_max_frac * h * w
+    valid = [(cv2.contourArea(c), c) for c in contours]
+    valid = [(a, c) for a, c in valid if a_min <= a <= a_max]
+    if not valid:
+        return _no_gap((h, w), f"no contour with {a_min:.0f} <= area <= {a_max:.0f} px² "
+                               f"({len(contours)} contours)", detector)
+    _, best = max(valid, key=lambda ac: ac[0])
+    return _from_contour((h, w), best, detector)
+
+
+def detect_gap(flow: np.ndarray, config: GapDetectorConfig = GapDetectorConfig()) -> GapDetection:
+    """The paper's gap detector on an H×W×2 flow field (colours it, normalised by its largest magnitude)."""
+    return detect_gap_in_colour(flow_to_colour(flow, bgr=True), config, detector="paper")
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Our detector: inverse depth from flow under translation
+# ----------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ParallaxGapConfig:
+    """Constants of :func:`detect_gap_parallax`."""
+
+    vfov_deg: float = 75.0            # used when no focal length is given (flowgap default camera)
+    min_g_frac: float = 0.08          # |g| below this fraction of its max is "too close to the FoE": filled
+    median_ksize: int = 5             # smoothing of the inverse-depth image
+    robust_percentiles: tuple[float, float] = (1.0, 99.0)   # inverse depth → 8 bit for Otsu
+    min_contrast: float = 1.5         # near/far inverse-depth ratio below which there is no gap
+    open_ksize: int = 5               # opening (remove specks) then closing of the far mask
+    close_ksize: int = 7
+    area_min_frac: float = 0.001
+    area_max_frac: float = 0.9
+    border_penalty: float = 0.5       # a component touching the image border counts this much of its area
+    min_flow_px: float = 0.05         # below this median |flow| there is no parallax to read
+
+
+@dataclass(frozen=True)
+class CameraMotion:
+    """Translation of the camera between the two frames, in camera axes (x right, y down, z forward).
+
+    Only its direction matters.  ``focal_px`` and ``principal_point`` default to the flowgap camera model
+    (vertical FOV from the config, centred principal point).
+    """
+
+    translation: tuple[float, float, float] | None = None
+    focal_px: float | None = None
+    principal_point: tuple[float, float] | None = None
+
+
+def _pixel_grid(h: int, w: int, cx: float, cy: float) -> tuple[np.ndarray, np.ndarray]:
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    return xs - cx, ys - cy
+
+
+def estimate_translation(flow: np.ndarray, focal_px: float, principal_point: tuple[float, float],
+                         *, iterations: int = 3, stride: int = 2) -> np.ndarray:
+    """Camera translation direction (unit 3-vector, camera axes) from a translation-only flow field.
+
+    Each pixel gives one linear constraint: the flow is parallel to g = (x'·tz − f·tx, y'·tz − f·ty), i.e.
+    u·(y'·tz − f·ty) − v·(x'·tz − f·tx) = 0.  Solved as a homogeneous least-squares problem (SVD), with
+    iteratively reweighted residuals; the sign is chosen so that inverse depth comes out positive.
+    """
+    h, w = flow.shape[:2]
+    xs, ys = _pixel_grid(h, w, *principal_point)
+    u = flow[::stride, ::stride, 0].ravel().astype(np.float64)
+    v = flow[::stride, ::stride, 1].ravel().astype(np.float64)
+    xp, yp = xs[::stride, ::stride].ravel(), ys[::stride, ::stride].ravel()
+    ok = np.isfinite(u) & np.isfinite(v)
+    u, v, xp, yp = u[ok], v[ok], xp[ok], yp[ok]
+    f = focal_px
+    a = np.stack([f * v, -f * u, u * yp - v * xp], axis=1)   # coefficients of (tx, ty, tz)
+    mag = np.hypot(u, v) + 1e-6
+    a = a / mag[:, None]                                      # normalise: constraint is on the direction
+    weights = np.ones(len(a))
+    t = np.array([0.0, 0.0, 1.0])
+    for _ in range(iterations):
+        _, _, vt = np.linalg.svd(a * weights[:, None], full_matrices=False)
+        t = vt[-1]
+        r = np.abs(a @ t)
+        scale = np.median(r) + 1e-9
+        weights = 1.0 / np.maximum(1.0, r / (2.0 * scale))   # Huber-like down-weighting of outliers
+    g_u = xp * t[2] - f * t[0]
+    g_v = yp * t[2] - f * t[1]
+    if np.median(u * g_u + v * g_v) < 0:
+        t = -t
+    return t / np.linalg.norm(t)
+
+
+def inverse_depth_from_flow(flow: np.ndarray, motion: CameraMotion = CameraMotion(),
+                            config: ParallaxGapConfig = ParallaxGapConfig()) -> tuple[np.ndarray, np.ndarray]:
+    """Relative inverse depth ρ (arbitrary positive scale) and the mask of pixels where it was measurable."""
+    h, w = flow.shape[:2]
+    f = motion.focal_px or (h / 2.0) / np.tan(np.radians(config.vfov_deg) / 2.0)
+    cx, cy = motion.principal_point or ((w - 1) / 2.0, (h - 1) / 2.0)
+    if motion.translation is None:
+        t = estimate_translation(flow, f, (cx, cy))
+    else:
+        t = np.asarray(motion.translation, dtype=np.float64)
+        t = t / (np.linalg.norm(t) + 1e-12)
+    xs, ys = _pixel_grid(h, w, cx, cy)
+    g_u = xs * t[2] - f * t[0]
+    g_v = ys * t[2] - f * t[1]
+    g2 = g_u * g_u + g_v * g_v
+    u = flow[..., 0].astype(np.float64)
+    v = flow[..., 1].astype(np.float64)
+    valid = (g2 >= (config.min_g_frac ** 2) * g2.max()) & np.isfinite(u) & np.isfinite(v)
+    rho = np.where(valid, (u * g_u + v * g_v) / np.maximum(g2, 1e-12), np.nan)
+    return rho, valid
+
+
+def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGapConfig(),
+                        motion: CameraMotion = CameraMotion()) -> GapDetection:
+    """Our detector: Otsu on inverse depth from flow under translation (see module docstring)."""
+    det = "parallax"
+    flow = np.asarray(flow, dtype=np.float32)
+    h, w = flow.shape[:2]
+    mag = np.hypot(flow[..., 0], flow[..., 1])
+    if not np.isfinite(mag).any() or float(np.nanmedian(mag)) < config.min_flow_px:
+        return _no_gap((h, w), "flow too small to measure parallax", det)
+    rho, valid = inverse_depth_from_flow(flow, motion, config)
+    if valid.sum() < 0.2 * h * w:
+        return _no_gap((h, w), "too few pixels away from the focus of expansion", det)
+    lo, hi = np.percentile(rho[valid], config.robust_percentiles)
+    if not hi > 0:
+        return _no_gap((h, w), "no positive inverse depth (motion not translation-like)", det)
+    # 8-bit inverse depth; pixels near the FoE are inpainted from their neighbours.
+    scaled = np.clip((np.nan_to_num(rho, nan=lo) - lo) / max(hi - lo, 1e-12), 0, 1)
+    img = (255 * scaled).astype(np.uint8)
+    if not valid.all():
+        img = cv2.inpaint(img, (~valid).astype(np.uint8), 5, cv2.INPAINT_TELEA)
+    if config.median_ksize > 1:
+        img = cv2.medianBlur(img, config.median_ksize)
+    otsu, far = cv2.threshold(img, 0, 1, cv2.THRESH_BINARY_INV + cv2.THRESH_OTSU)
+    # contrast check: is there a real depth step between the two classes?
+    rho_s = lo + img.astype(np.float64) / 255.0 * (hi - lo)
+    near_med = np.median(rho_s[far == 0]) if (far == 0).any() else 0.0
+    far_med = np.median(rho_s[far == 1]) if (far == 1).any() else 0.0
+    if near_med <= 0 or near_med < config.min_contrast * max(far_med, 1e-12 * near_med):
+        return _no_gap((h, w), f"no depth contrast (near/far inverse depth {near_med:.3g}/{far_med:.3g})",
+                       det)
+    far = cv2.morphologyEx(far, cv2.MORPH_OPEN, cv2.getStructuringElement(
+        cv2.MORPH_ELLIPSE, (config.open_ksize, config.open_ksize)))
+    far = cv2.morphologyEx(far, cv2.MORPH_CLOSE, cv2.getStructuringElement(
+        cv2.MORPH_ELLIPSE, (config.close_ksize, config.close_ksize)))
+    contours, _ = cv2.findContours(far, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    a_min, a_max = config.area_min_frac * h * w, config.area_max_frac * h * w
+    best, best_score = None, 0.0
+    for c in contours:
+        area = cv2.contourArea(c)
+        if not a_min <= area <= a_max:
+            continue
+        x, y, bw, bh = cv2.boundingRect(c)
+        touches = x <= 0 or y <= 0 or x + bw >= w or y + bh >= h
+        score = area * (config.border_penalty if touches else 1.0)
+        if score > best_score:
+            best, best_score = c, score
+    if best is None:
+        return _no_gap((h, w), f"no far region with {a_min:.0f} <= area <= {a_max:.0f} px²", det)
+    return _from_contour((h, w), best, det)
+
+
+DETECTORS = {"paper": detect_gap, "parallax": detect_gap_parallax}
+
+
+def get_detector(name: str):
+    """The detector function registered as ``name`` ("paper" or "parallax")."""
+    if name not in DETECTORS:
+        raise KeyError(f"unknown gap detector {name!r}; choose from {sorted(DETECTORS)}")
+    return DETECTORS[name]

@@ -1,0 +1,45 @@
+import numpy as np
+import pytest
+
+from companion.flow import FlowBackend, available_backends, make_flow_backend
+from tests.companion.synthetic import textured_pair
+
+SHIFT = (2.5, -1.5)
+
+
+@pytest.mark.parametrize("name, options, bound", [
+    ("dis", {"preset": "ultrafast"}, 0.4),
+    ("dis", {"preset": "fast"}, 0.4),
+    ("dis", {"preset": "medium"}, 0.1),
+    ("farneback", {}, 0.1),
+])
+def test_known_shift_epe(name, options, bound):
+    img1, img2 = textured_pair(120, 160, SHIFT)
+    backend = make_flow_backend(name, **options)
+    assert isinstance(backend, FlowBackend) and backend.name == name and backend.device == "cpu"
+    flow = backend.estimate(img1, img2)
+    assert flow.shape == (120, 160, 2) and flow.dtype == np.float32
+    epe = np.hypot(flow[..., 0] - SHIFT[0], flow[..., 1] - SHIFT[1])[8:-8, 8:-8]
+    assert epe.mean() < bound, f"{name} {options}: mean EPE {epe.mean():.3f} px"
+
+
+def test_dis_warm_start_uses_previous_flow():
+    img1, img2 = textured_pair(120, 160, SHIFT)
+    backend = make_flow_backend("dis", preset="ultrafast", warm_start=True)
+    backend.estimate(img1, img2)
+    second = backend.estimate(img1, img2)
+    epe = np.hypot(second[..., 0] - SHIFT[0], second[..., 1] - SHIFT[1])[8:-8, 8:-8]
+    assert epe.mean() < 0.4
+
+
+def test_registry_rejects_unknown_and_bad_inputs():
+    assert {"dis", "farneback", "raft"} <= set(available_backends())
+    with pytest.raises(KeyError, match="unknown flow backend"):
+        make_flow_backend("nope")
+    with pytest.raises(ValueError, match="preset"):
+        make_flow_backend("dis", preset="slow")
+    img = np.zeros((10, 10, 3), np.uint8)
+    with pytest.raises(ValueError, match="uint8"):
+        make_flow_backend("dis").estimate(img.astype(np.float32), img)
+    with pytest.raises(ValueError, match="shape"):
+        make_flow_backend("dis").estimate(img, np.zeros((10, 12, 3), np.uint8))
