@@ -1,0 +1,121 @@
+"""RAFT: encode both frames, build the correlation pyramid once, refine the flow with a recurrent update."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import torch
+from torch import nn
+
+from companion.flow.raft.corr import CorrBlock
+from companion.flow.raft.extractor import basic_encoder, small_encoder
+from companion.flow.raft.update import UpdateBlock
+from companion.flow.raft.upsample import convex_upsample, upflow8
+
+
+@dataclass(frozen=True)
+class RaftConfig:
+    """Architecture hyper-parameters.  Use :meth:`small` or :meth:`large` (the paper's two models)."""
+
+    variant: str = "small"
+    hidden_dim: int = 96
+    context_dim: int = 64
+    corr_levels: int = 4
+    corr_radius: int = 3
+    dropout: float = 0.0
+
+    @classmethod
+    def small(cls, **kw) -> RaftConfig:
+        return cls("small", 96, 64, 4, 3, **kw)
+
+    @classmethod
+    def large(cls, **kw) -> RaftConfig:
+        return cls("large", 128, 128, 4, 4, **kw)
+
+    @classmethod
+    def for_variant(cls, variant: str, **kw) -> RaftConfig:
+        if variant not in ("small", "large"):
+            raise ValueError(f"unknown RAFT variant {variant!r}; choose 'small' or 'large'")
+        return cls.small(**kw) if variant == "small" else cls.large(**kw)
+
+
+class RaftOutput(NamedTuple):
+    flow_low: torch.Tensor                  # N×2×(H/8)×(W/8), the state to warm-start the next pair from
+    flow_up: torch.Tensor                   # N×2×H×W, the final estimate
+    predictions: list[torch.Tensor]         # per-iteration N×2×H×W estimates when requested, else []
+
+
+def coords_grid(n: int, h: int, w: int, device=None, dtype=torch.float32) -> torch.Tensor:
+    """N×2×h×w pixel coordinates, channel 0 = x, channel 1 = y."""
+    ys, xs = torch.meshgrid(torch.arange(h, device=device, dtype=dtype),
+                            torch.arange(w, device=device, dtype=dtype), indexing="ij")
+    return torch.stack([xs, ys], dim=0).unsqueeze(0).expand(n, 2, h, w).contiguous()
+
+
+class RAFT(nn.Module):
+    """RAFT / RAFT-small.  ``forward(image1, image2, iters, flow_init)`` on N×3×H×W images in 0..255.
+
+    H and W must be multiples of 8 (use :class:`InputPadder`).  ``flow_init`` (N×2×H/8×W/8) starts the
+    refinement from a previous estimate (warm start) instead of zero.
+    """
+
+    def __init__(self, config: RaftConfig | None = None) -> None:
+        super().__init__()
+        config = config if config is not None else RaftConfig.small()
+        self.config = config
+        small = config.variant == "small"
+        hdim, cdim = config.hidden_dim, config.context_dim
+        if small:
+            self.fnet = small_encoder(128, "instance", config.dropout)
+            self.cnet = small_encoder(hdim + cdim, "none", config.dropout)
+        else:
+            self.fnet = basic_encoder(256, "instance", config.dropout)
+            self.cnet = basic_encoder(hdim + cdim, "batch", config.dropout)
+        corr_channels = config.corr_levels * (2 * config.corr_radius + 1) ** 2
+        self.update_block = UpdateBlock(corr_channels=corr_channels, hidden_dim=hdim, context_dim=cdim,
+                                        small=small)
+
+    def forward(self, image1: torch.Tensor, image2: torch.Tensor, iters: int = 12,
+                flow_init: torch.Tensor | None = None, all_predictions: bool = False) -> RaftOutput:
+        n, _, h, w = image1.shape
+        if image2.shape != image1.shape:
+            raise ValueError(f"images differ in shape: {tuple(image1.shape)} vs {tuple(image2.shape)}")
+        if h % 8 or w % 8:
+            raise ValueError(f"RAFT needs H and W divisible by 8 (got {h}×{w}); pad with InputPadder")
+        cfg = self.config
+        image1 = 2.0 * (image1 / 255.0) - 1.0
+        image2 = 2.0 * (image2 / 255.0) - 1.0
+
+        # 1. features of both frames (one batch), context of the first
+        fmap1, fmap2 = self.fnet(torch.cat([image1, image2], dim=0)).float().chunk(2, dim=0)
+        corr_fn = CorrBlock(fmap1, fmap2, num_levels=cfg.corr_levels, radius=cfg.corr_radius)
+        net, inp = torch.split(self.cnet(image1), [cfg.hidden_dim, cfg.context_dim], dim=1)
+        net, inp = torch.tanh(net), torch.relu(inp)
+
+        # 2. flow as coordinate update: coords1 − coords0, starting from zero or the warm start
+        coords0 = coords_grid(n, h // 8, w // 8, device=image1.device)
+        coords1 = coords0.clone()
+        if flow_init is not None:
+            if flow_init.shape != coords0.shape:
+                raise ValueError(f"flow_init must be {tuple(coords0.shape)}, got {tuple(flow_init.shape)}")
+            coords1 = coords1 + flow_init
+
+        # 3. iterate: look up correlation around the estimate, update the hidden state, step the flow
+        predictions: list[torch.Tensor] = []
+        up_mask = None
+        for it in range(iters):
+            coords1 = coords1.detach()
+            corr = corr_fn(coords1)
+            net, up_mask, delta = self.update_block(net, inp, corr, coords1 - coords0)
+            coords1 = coords1 + delta
+            if all_predictions or it == iters - 1:
+                predictions.append(self._upsample(coords1 - coords0, up_mask))
+
+        flow_low = coords1 - coords0
+        flow_up = predictions[-1] if predictions else self._upsample(flow_low, up_mask)
+        return RaftOutput(flow_low, flow_up, predictions if all_predictions else [])
+
+    @staticmethod
+    def _upsample(flow: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+        return upflow8(flow) if mask is None else convex_upsample(flow, mask)

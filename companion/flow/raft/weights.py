@@ -1,0 +1,190 @@
+"""RAFT weights: three on-disk layouts, one in-memory layout (ours), loaded once per process.
+
+Layouts recognised by :func:`load_raft_state_dict`:
+
+``official``
+    The RAFT authors' checkpoints (``raft-things.pth``, ``raft-sintel.pth``, ``raft-kitti.pth``,
+    ``raft-chairs.pth``, ``raft-small.pth``): a state dict saved from ``nn.DataParallel``, so every key starts
+    with ``module.``.  Our module names are theirs; their residual/bottleneck blocks also register the
+    shortcut norm a second time as ``norm3`` (``norm4`` in bottlenecks), an alias of ``downsample.1``.
+``torchvision``
+    ``torchvision.models.optical_flow.raft_large / raft_small`` state dicts (``feature_encoder.``,
+    ``context_encoder.``, ``update_block.motion_encoder.``, ``mask_predictor.``, ``Conv2dNormActivation``
+    sub-indices ``.0`` conv / ``.1`` norm).  Mapped key by key by :func:`torchvision_to_ours`.
+``flowgap``
+    ``{"format": "flowgap-raft", "version": 1, "variant": "small"|"large", "state_dict": {...ours...}}``,
+    written by :func:`save_flowgap_weights` (the RAFT training tool's output).
+
+Nothing is ever downloaded: a missing or mismatched file raises :class:`FlowWeightsError` with a one-line
+message naming the path and the expected format.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import threading
+from collections.abc import Mapping
+from pathlib import Path
+
+import torch
+
+from companion.flow.base import FlowWeightsError
+
+log = logging.getLogger(__name__)
+
+FORMAT_NAME = "flowgap-raft"
+FORMAT_VERSION = 1
+EXPECTED = ("an official RAFT checkpoint (raft-things.pth / raft-small.pth, 'module.' keys), a torchvision "
+            "raft_large/raft_small state dict, or a flowgap-raft file")
+
+_CACHE: dict[tuple, tuple[str, dict[str, torch.Tensor]]] = {}
+_LOCK = threading.Lock()
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Layout detection and key mapping
+# ---------------------------------------------------------------------------------------------------------
+
+def detect_layout(obj: object) -> str:
+    """'flowgap', 'official', 'torchvision' or 'unknown' for a loaded checkpoint object."""
+    if isinstance(obj, Mapping) and obj.get("format") == FORMAT_NAME:
+        return "flowgap"
+    if not isinstance(obj, Mapping) or not obj:
+        return "unknown"
+    keys = [k for k in obj if isinstance(k, str)]
+    if len(keys) != len(obj) or not all(isinstance(v, torch.Tensor) for v in obj.values()):
+        return "unknown"
+    stripped = [k[len("module."):] if k.startswith("module.") else k for k in keys]
+    if any(k.startswith("feature_encoder.") for k in stripped):
+        return "torchvision"
+    if any(k.startswith("fnet.") for k in stripped):
+        return "official"
+    return "unknown"
+
+
+def detect_variant(state_dict: Mapping[str, torch.Tensor]) -> str | None:
+    """'small' / 'large' from our-layout keys, None when neither GRU is present."""
+    if "update_block.gru.convz.weight" in state_dict:
+        return "small"
+    if "update_block.gru.convz1.weight" in state_dict:
+        return "large"
+    return None
+
+
+_ALIAS = re.compile(r"^(?P<block>(?:fnet|cnet)\.layer\d\.\d)\.(?P<norm>norm3|norm4)\.(?P<rest>.+)$")
+
+
+def official_to_ours(state_dict: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Strip ``module.`` and fold the ``norm3``/``norm4`` aliases of ``downsample.1`` into it."""
+    sd = {(k[len("module."):] if k.startswith("module.") else k): v for k, v in state_dict.items()}
+    out: dict[str, torch.Tensor] = {}
+    is_small = "update_block.gru.convz.weight" in sd
+    for key, value in sd.items():
+        m = _ALIAS.match(key)
+        # In residual blocks (RAFT) norm3 is the shortcut norm; in bottleneck blocks (RAFT-small) norm3
+        # belongs to conv3 and norm4 is the shortcut norm.
+        if m and (m["norm"] == "norm4" or not is_small):
+            target = f"{m['block']}.downsample.1.{m['rest']}"
+            if target in sd:
+                if not torch.equal(sd[target], value):
+                    raise ValueError(f"{key} differs from its alias {target}")
+                continue
+            key = target
+        out[key] = value
+    return out
+
+
+_TV_RULES: list[tuple[re.Pattern, str]] = [(re.compile(p), r) for p, r in [
+    (r"^feature_encoder\.", "fnet."),
+    (r"^context_encoder\.", "cnet."),
+    (r"^(fnet|cnet)\.convnormrelu\.0\.", r"\1.conv1."),
+    (r"^(fnet|cnet)\.convnormrelu\.1\.", r"\1.norm1."),
+    (r"^(fnet|cnet)\.conv\.", r"\1.conv2."),
+    (r"^(fnet|cnet)\.(layer\d\.\d)\.convnormrelu(\d)\.0\.", r"\1.\2.conv\3."),
+    (r"^(fnet|cnet)\.(layer\d\.\d)\.convnormrelu(\d)\.1\.", r"\1.\2.norm\3."),
+    (r"^update_block\.motion_encoder\.convcorr(\d)\.0\.", r"update_block.encoder.convc\1."),
+    (r"^update_block\.motion_encoder\.convflow(\d)\.0\.", r"update_block.encoder.convf\1."),
+    (r"^update_block\.motion_encoder\.conv\.0\.", "update_block.encoder.conv."),
+    (r"^mask_predictor\.convrelu\.0\.", "update_block.mask.0."),
+    (r"^mask_predictor\.conv\.", "update_block.mask.2."),
+]]
+_TV_GRU = re.compile(r"^update_block\.recurrent_block\.convgru(\d)\.conv([zrq])\.(.+)$")
+
+
+def torchvision_to_ours(state_dict: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Rename torchvision RAFT keys to ours (shapes are identical)."""
+    sd = {(k[len("module."):] if k.startswith("module.") else k): v for k, v in state_dict.items()}
+    separable = any(k.startswith("update_block.recurrent_block.convgru2.") for k in sd)
+    out: dict[str, torch.Tensor] = {}
+    for key, value in sd.items():
+        new = key
+        for pattern, repl in _TV_RULES:
+            new = pattern.sub(repl, new)
+        m = _TV_GRU.match(new)
+        if m:
+            suffix = m[1] if separable else ""
+            new = f"update_block.gru.conv{m[2]}{suffix}.{m[3]}"
+        out[new] = value
+    return out
+
+
+def to_ours(obj: object) -> tuple[str, dict[str, torch.Tensor]]:
+    """(layout, our-layout state dict) for a loaded checkpoint object; raises ValueError if unrecognised."""
+    layout = detect_layout(obj)
+    if layout == "flowgap":
+        sd = obj["state_dict"]
+        if obj.get("version") != FORMAT_VERSION:
+            raise ValueError(f"flowgap-raft version {obj.get('version')!r}, expected {FORMAT_VERSION}")
+        return layout, dict(sd)
+    if layout == "official":
+        return layout, official_to_ours(obj)
+    if layout == "torchvision":
+        return layout, torchvision_to_ours(obj)
+    raise ValueError("unrecognised checkpoint layout")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Files
+# ---------------------------------------------------------------------------------------------------------
+
+def load_raft_state_dict(path: str | Path) -> tuple[str, str, dict[str, torch.Tensor]]:
+    """(layout, variant, our-layout CPU state dict) from ``path``, cached per process by path+mtime+size."""
+    path = Path(path).expanduser()
+    if not path.is_file():
+        raise FlowWeightsError(f"RAFT weights not found: {path} (expected {EXPECTED}; nothing is downloaded)")
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    with _LOCK:
+        if key in _CACHE:
+            layout, sd = _CACHE[key]
+            return layout, detect_variant(sd) or "?", sd
+        try:
+            obj = torch.load(path, map_location="cpu", weights_only=True)
+        except Exception as exc:  # noqa: BLE001 - any unreadable file gets the same one-line error
+            raise FlowWeightsError(f"RAFT weights unreadable: {path} ({type(exc).__name__}; expected {EXPECTED})"
+                                   ) from exc
+        try:
+            layout, sd = to_ours(obj)
+        except ValueError as exc:
+            raise FlowWeightsError(f"RAFT weights not recognised: {path} ({exc}; expected {EXPECTED})") from exc
+        variant = detect_variant(sd)
+        if variant is None:
+            raise FlowWeightsError(f"RAFT weights not recognised: {path} (no update-block GRU; expected {EXPECTED})")
+        _CACHE[key] = (layout, sd)
+        log.info("loaded RAFT-%s weights (%s layout) from %s", variant, layout, path)
+        return layout, variant, sd
+
+
+def clear_cache() -> None:
+    with _LOCK:
+        _CACHE.clear()
+
+
+def save_flowgap_weights(model: torch.nn.Module, path: str | Path, variant: str) -> Path:
+    """Write ``model``'s weights in the flowgap layout."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    torch.save({"format": FORMAT_NAME, "version": FORMAT_VERSION, "variant": variant, "state_dict": state}, path)
+    return path

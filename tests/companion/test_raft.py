@@ -1,0 +1,265 @@
+"""Our RAFT: checkpoint layouts, padding, warm start, correlation lookup.  Tiny images, few iterations."""
+
+import re
+
+import numpy as np
+import pytest
+import torch
+
+from companion.flow import FlowWeightsError, make_flow_backend
+from companion.flow.raft import RAFT, InputPadder, RaftConfig
+from companion.flow.raft.corr import CorrBlock
+from companion.flow.raft.upsample import convex_upsample
+from companion.flow.raft.weights import clear_cache, save_flowgap_weights
+from tests.companion.synthetic import textured_pair
+
+torch.set_num_threads(2)
+
+# torchvision's published parameter counts (Raft_Large_Weights / Raft_Small_Weights meta "num_params")
+TORCHVISION_NUM_PARAMS = {"large": 5257536, "small": 990162}
+# (key, shape) pairs as torchvision's raft_large / raft_small name them
+TORCHVISION_KNOWN = {
+    "large": {
+        "feature_encoder.convnormrelu.0.weight": (64, 3, 7, 7),
+        "context_encoder.convnormrelu.1.running_var": (64,),
+        "context_encoder.layer2.0.downsample.1.weight": (96,),
+        "context_encoder.conv.weight": (256, 128, 1, 1),
+        "update_block.motion_encoder.convcorr1.0.weight": (256, 324, 1, 1),
+        "update_block.recurrent_block.convgru1.convz.weight": (128, 384, 1, 5),
+        "update_block.recurrent_block.convgru2.convq.weight": (128, 384, 5, 1),
+        "update_block.flow_head.conv1.weight": (256, 128, 3, 3),
+        "mask_predictor.convrelu.0.weight": (256, 128, 3, 3),
+        "mask_predictor.conv.weight": (576, 256, 1, 1),
+    },
+    "small": {
+        "feature_encoder.layer1.0.convnormrelu3.0.weight": (32, 8, 1, 1),
+        "feature_encoder.layer2.0.downsample.0.weight": (64, 32, 1, 1),
+        "context_encoder.conv.weight": (160, 96, 1, 1),
+        "update_block.motion_encoder.convcorr1.0.weight": (96, 196, 1, 1),
+        "update_block.motion_encoder.conv.0.weight": (80, 128, 3, 3),
+        "update_block.recurrent_block.convgru1.convz.weight": (96, 242, 3, 3),
+        "update_block.flow_head.conv1.weight": (128, 96, 3, 3),
+    },
+}
+
+
+# --- an independent mapping, written here from torchvision's module names: ours/official -> torchvision ----
+
+def ours_to_torchvision(sd: dict, variant: str) -> dict:
+    out = {}
+    for key, value in sd.items():
+        parts = key.split(".")
+        if parts[0] in ("fnet", "cnet"):
+            enc = {"fnet": "feature_encoder", "cnet": "context_encoder"}[parts[0]]
+            if parts[1] == "conv1":
+                new = [enc, "convnormrelu", "0", *parts[2:]]
+            elif parts[1] == "norm1":
+                new = [enc, "convnormrelu", "1", *parts[2:]]
+            elif parts[1] == "conv2":
+                new = [enc, "conv", *parts[2:]]
+            else:                                   # layerA.B.<name>.<param>
+                layer, idx, name = parts[1], parts[2], parts[3]
+                if name.startswith("conv"):
+                    new = [enc, layer, idx, "convnormrelu" + name[4:], "0", *parts[4:]]
+                elif name.startswith("norm"):
+                    new = [enc, layer, idx, "convnormrelu" + name[4:], "1", *parts[4:]]
+                else:                               # downsample.0 / downsample.1
+                    new = [enc, *parts[1:]]
+        elif parts[1] == "encoder":
+            name = parts[2]
+            table = {"convc1": "convcorr1.0", "convc2": "convcorr2.0", "convf1": "convflow1.0",
+                     "convf2": "convflow2.0", "conv": "conv.0"}
+            new = ["update_block", "motion_encoder", *table[name].split("."), *parts[3:]]
+        elif parts[1] == "gru":
+            name = parts[2]                         # convz / convz1 / convz2
+            gru = "convgru" + (name[5:] or "1")
+            new = ["update_block", "recurrent_block", gru, name[:5], *parts[3:]]
+        elif parts[1] == "mask":
+            new = ["mask_predictor", {"0": "convrelu.0", "2": "conv"}[parts[2]], *parts[3:]]
+        else:
+            new = parts                             # update_block.flow_head.*
+        out[".".join(new)] = value
+    return out
+
+
+def ours_to_official(sd: dict, variant: str) -> dict:
+    """DataParallel prefix, plus the shortcut-norm aliases the official blocks register."""
+    out = {"module." + k: v for k, v in sd.items()}
+    alias = "norm4" if variant == "small" else "norm3"
+    for key, value in sd.items():
+        m = re.match(r"^((?:fnet|cnet)\.layer\d\.\d)\.downsample\.1\.(.+)$", key)
+        if m:
+            out[f"module.{m[1]}.{alias}.{m[2]}"] = value
+    return out
+
+
+def random_model(variant: str, seed: int = 0) -> RAFT:
+    torch.manual_seed(seed)
+    model = RAFT(RaftConfig.for_variant(variant))
+    with torch.no_grad():     # make BatchNorm statistics matter
+        for m in model.modules():
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.running_mean.uniform_(-0.2, 0.2)
+                m.running_var.uniform_(0.5, 1.5)
+                m.weight.uniform_(0.5, 1.5)
+                m.bias.uniform_(-0.1, 0.1)
+    return model
+
+
+@pytest.fixture(autouse=True)
+def _fresh_cache():
+    clear_cache()
+    yield
+    clear_cache()
+
+
+@pytest.mark.parametrize("variant", ["small", "large"])
+def test_official_and_torchvision_layouts_give_identical_flow(tmp_path, variant):
+    model = random_model(variant)
+    ours = {k: v.clone() for k, v in model.state_dict().items()}
+    assert sum(p.numel() for p in model.parameters()) == TORCHVISION_NUM_PARAMS[variant]
+    tv = ours_to_torchvision(ours, variant)
+    for key, shape in TORCHVISION_KNOWN[variant].items():
+        assert tuple(tv[key].shape) == shape, key
+    official = ours_to_official(ours, variant)
+    torch.save(official, tmp_path / f"raft-{variant}-official.pth")
+    torch.save(tv, tmp_path / f"raft_{variant}_tv.pth")
+    save_flowgap_weights(model, tmp_path / "ours.pth", variant)
+
+    img1, img2 = textured_pair(64, 72, (1.5, -1.0))
+    flows = {}
+    for name in (f"raft-{variant}-official.pth", f"raft_{variant}_tv.pth", "ours.pth"):
+        backend = make_flow_backend("raft", weights=tmp_path / name, iters=2)
+        assert backend.variant == variant
+        flows[name] = backend.estimate(img1, img2)
+    ref = flows["ours.pth"]
+    assert np.abs(ref).max() > 0
+    for name, flow in flows.items():
+        assert np.array_equal(flow, ref), name
+
+
+def test_module_prefix_is_optional_and_loading_is_cached(tmp_path):
+    model = random_model("small")
+    sd = model.state_dict()
+    torch.save(sd, tmp_path / "plain.pth")                        # no "module." prefix
+    torch.save(ours_to_official(sd, "small"), tmp_path / "dp.pth")
+    img1, img2 = textured_pair(64, 64, (1.0, 0.0))
+    a = make_flow_backend("raft", weights=tmp_path / "plain.pth", iters=1).estimate(img1, img2)
+    b = make_flow_backend("raft", weights=tmp_path / "dp.pth", iters=1).estimate(img1, img2)
+    assert np.array_equal(a, b)
+    from companion.flow.raft import weights as w
+    assert len(w._CACHE) == 2
+    make_flow_backend("raft", weights=tmp_path / "dp.pth", iters=1)
+    assert len(w._CACHE) == 2
+
+
+def _one_line_error(match: str, **options):
+    with pytest.raises(FlowWeightsError) as info:
+        make_flow_backend("raft", **options)
+    msg = str(info.value)
+    assert "\n" not in msg and match in msg
+    return msg
+
+
+def test_missing_default_weights_say_so(tmp_path):
+    msg = _one_line_error("raft-small-flowgap.pth")
+    assert "not found" in msg and "official RAFT" in msg and "torchvision" in msg
+    _one_line_error(str(tmp_path / "nope.pth"), weights=tmp_path / "nope.pth")
+
+
+def test_mismatched_weights_are_rejected(tmp_path):
+    small = random_model("small").state_dict()
+    torch.save(ours_to_torchvision(small, "small"), tmp_path / "small_tv.pth")
+    msg = _one_line_error(str(tmp_path / "small_tv.pth"), weights=tmp_path / "small_tv.pth", variant="large")
+    assert "mismatch" in msg
+    broken = dict(small)
+    broken["update_block.flow_head.conv2.weight"] = torch.zeros(2, 128, 5, 5)
+    torch.save(broken, tmp_path / "bad_shape.pth")
+    _one_line_error("bad_shape.pth", weights=tmp_path / "bad_shape.pth")
+    del broken["update_block.flow_head.conv2.weight"]
+    torch.save(broken, tmp_path / "missing_key.pth")
+    _one_line_error("missing_key.pth", weights=tmp_path / "missing_key.pth")
+    torch.save({"something": torch.zeros(3)}, tmp_path / "other.pth")
+    _one_line_error("not recognised", weights=tmp_path / "other.pth")
+    (tmp_path / "garbage.pth").write_bytes(b"not a checkpoint")
+    _one_line_error("unreadable", weights=tmp_path / "garbage.pth")
+
+
+@pytest.mark.parametrize("h, w", [(75, 100), (64, 64), (61, 83)])
+def test_output_shape_and_padding(h, w):
+    backend = make_flow_backend("raft", random_init_seed=1, iters=2)
+    img1, img2 = textured_pair(h, w, (1.0, 0.5))
+    flow = backend.estimate(img1, img2)
+    assert flow.shape == (h, w, 2) and flow.dtype == np.float32 and np.isfinite(flow).all()
+    padder = InputPadder((h, w))
+    x = torch.arange(h * w, dtype=torch.float32).view(1, 1, h, w)
+    (padded,) = padder.pad(x)
+    assert padded.shape[-2] % 8 == 0 and padded.shape[-1] % 8 == 0
+    assert padded.shape[-2] - h < 8 and padded.shape[-1] - w < 8
+    assert torch.equal(padder.unpad(padded), x)
+    left, right, top, bottom = padder.padding
+    assert abs(left - right) <= 1 and abs(top - bottom) <= 1
+
+
+def test_model_rejects_unpadded_input():
+    model = RAFT(RaftConfig.small()).eval()
+    with pytest.raises(ValueError, match="divisible by 8"):
+        model(torch.zeros(1, 3, 60, 64), torch.zeros(1, 3, 60, 64))
+
+
+def test_warm_start_changes_result_and_zero_update_returns_init():
+    img1, img2 = textured_pair(64, 64, (2.0, 1.0))
+    backend = make_flow_backend("raft", random_init_seed=2, iters=2)
+    cold = backend.estimate(img1, img2)
+    init = np.zeros((64, 64, 2), np.float32)
+    assert np.allclose(backend.estimate(img1, img2, flow_init=init), cold, atol=1e-5)  # zero init == cold
+    init[..., 0], init[..., 1] = 2.0, 1.0
+    warm = backend.estimate(img1, img2, flow_init=init)
+    assert np.abs(warm - cold).max() > 1e-3
+    # With the flow head silenced, refinement adds nothing: any number of iterations returns the init.
+    with torch.no_grad():
+        backend.model.update_block.flow_head.conv2.weight.zero_()
+        backend.model.update_block.flow_head.conv2.bias.zero_()
+    for iters in (0, 1, 5):
+        out = backend.estimate(img1, img2, flow_init=init, iters=iters)
+        np.testing.assert_allclose(out, init, atol=1e-5)
+
+
+def test_backend_warm_start_carries_previous_flow():
+    img1, img2 = textured_pair(64, 64, (2.0, 1.0))
+    warm = make_flow_backend("raft", random_init_seed=3, iters=1, warm_start=True)
+    cold = make_flow_backend("raft", random_init_seed=3, iters=1)
+    first = warm.estimate(img1, img2)
+    assert np.array_equal(first, cold.estimate(img1, img2))   # nothing to carry on the first pair
+    second = warm.estimate(img1, img2)
+    assert not np.allclose(second, first)
+    warm.reset()
+    assert np.array_equal(warm.estimate(img1, img2), first)
+
+
+def test_corr_block_lookup_matches_brute_force_and_channel_order():
+    torch.manual_seed(0)
+    f1, f2 = torch.randn(1, 8, 6, 7), torch.randn(1, 8, 6, 7)
+    r = 2
+    corr = CorrBlock(f1, f2, num_levels=2, radius=r)
+    coords = torch.zeros(1, 2, 6, 7)
+    coords[0, 0] = torch.arange(7.0).view(1, 7)     # zero flow: coords = pixel grid
+    coords[0, 1] = torch.arange(6.0).view(6, 1)
+    out = corr(coords)
+    assert out.shape == (1, 2 * (2 * r + 1) ** 2, 6, 7)
+    y, x = 3, 3
+    for i, dx in enumerate(range(-r, r + 1)):        # x offset is the slow index (official layout)
+        for j, dy in enumerate(range(-r, r + 1)):
+            expected = (f1[0, :, y, x] * f2[0, :, y + dy, x + dx]).sum() / np.sqrt(8)
+            assert out[0, i * (2 * r + 1) + j, y, x].item() == pytest.approx(expected.item(), abs=1e-5)
+
+
+def test_convex_upsampling_of_constant_flow_is_exact_inside():
+    flow = torch.zeros(1, 2, 4, 5)
+    flow[:, 0], flow[:, 1] = 1.25, -0.5
+    up = convex_upsample(flow, torch.randn(1, 576, 4, 5))
+    assert up.shape == (1, 2, 32, 40)
+    inner = up[0, :, 8:24, 8:32]            # coarse cells whose 3×3 window lies inside (RAFT pads with 0)
+    assert torch.allclose(inner[0], torch.full_like(inner[0], 10.0))
+    assert torch.allclose(inner[1], torch.full_like(inner[1], -4.0))
+    assert not torch.allclose(up[0, 0, :8], torch.full((8, 40), 10.0))
