@@ -1,0 +1,374 @@
+"""Acceptance tests of flowgap-tlog (tools.tlog) on tlogs written here with pymavlink and on a real log."""
+
+from __future__ import annotations
+
+import json
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v10 import common as mav1
+from pymavlink.dialects.v20 import common as mav2
+
+from tools.tlog import analyse_tlog, main, write_outputs
+from tools.tlog.framing import crc_x25, decode_columns, load_dialect, scan_tlog
+
+TESTDATA = Path(__file__).resolve().parents[1] / ".." / ".." / "shared" / "testdata"
+ARDUSUB = TESTDATA / "ardusub-qgc-small.tlog"
+T0_US = 1_750_000_000_000_000  # an arbitrary UNIX time in µs
+
+PX4_POSCTL = 3 << 16
+PX4_TAKEOFF = (4 << 16) | (2 << 24)
+PX4_OFFBOARD = 6 << 16
+PX4_LAND = (4 << 16) | (6 << 24)
+POS_ONLY = 0x0FF8        # velocity, acceleration, yaw, yaw rate ignored
+VEL_ONLY = 0x0FC7        # x, y, z ignored
+
+
+@dataclass
+class Flight:
+    """What the synthetic flight wrote, kept for independent checks."""
+
+    records: list[tuple[int, bytes, str]] = field(default_factory=list)  # (µs, packet, type)
+    setpoints: list[tuple[int, int, tuple[float, float, float]]] = field(default_factory=list)
+    positions: list[tuple[int, tuple[float, float, float]]] = field(default_factory=list)
+    truth: list[tuple[int, tuple[float, float, float]]] = field(default_factory=list)
+    heartbeats: list[tuple[int, int, bool]] = field(default_factory=list)  # (µs, custom_mode, armed)
+    dropped: int = 0
+
+    def tlog(self) -> bytes:
+        return b"".join(struct.pack(">Q", t) + pkt for t, pkt, _ in sorted(self.records, key=lambda r: r[0]))
+
+    def counts(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for _, _, name in self.records:
+            out[name] = out.get(name, 0) + 1
+        return out
+
+
+def px4_mode_at(t: float) -> tuple[int, bool]:
+    if t < 2.0:
+        return PX4_POSCTL, False
+    if t < 5.0:
+        return PX4_TAKEOFF, True
+    if t < 14.0:
+        return PX4_OFFBOARD, True
+    return PX4_LAND, t < 17.0
+
+
+def synthetic_flight(seed: int = 0, with_truth: bool = True, with_positions: bool = True) -> Flight:
+    """18 s PX4-style flight: heartbeats 1 Hz, setpoints 20 Hz (4–14 s, a 0.35 s gap, a velocity-only
+    second), LOCAL_POSITION_NED 50 Hz following with lag and noise, signed ATT_POS_MOCAP truth from its own
+    component, MAVLink 1 GCS heartbeats, STATUSTEXT, and a few vehicle packets dropped (sequence gaps)."""
+    rng = np.random.default_rng(seed)
+    fl = Flight()
+    veh = mav2.MAVLink(None, srcSystem=1, srcComponent=1)
+    comp = mav2.MAVLink(None, srcSystem=1, srcComponent=191)
+    tru = mav2.MAVLink(None, srcSystem=1, srcComponent=197)
+    tru.signing.secret_key = bytes(range(32))
+    tru.signing.sign_outgoing = True
+    tru.signing.timestamp = 1
+    gcs = mav1.MAVLink(None, srcSystem=255, srcComponent=190)
+
+    events: list[tuple[int, int, object, object, bool]] = []
+
+    def put(mav, t_s: float, msg, keep: bool = True) -> None:
+        events.append((T0_US + round(t_s * 1e6), len(events), mav, msg, keep))
+
+    for k in range(18):
+        t = k + 0.5 if k else 0.0
+        mode, armed = px4_mode_at(t)
+        base = mav2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav2.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+        put(veh, t, mav2.MAVLink_heartbeat_message(mav2.MAV_TYPE_QUADROTOR, mav2.MAV_AUTOPILOT_PX4, base, mode,
+                                                    mav2.MAV_STATE_ACTIVE, 3))
+        fl.heartbeats.append((T0_US + round(t * 1e6), mode, armed))
+        put(comp, t + 0.0002, mav2.MAVLink_heartbeat_message(mav2.MAV_TYPE_ONBOARD_CONTROLLER,
+                                                              mav2.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+        put(gcs, t + 0.0003, mav1.MAVLink_heartbeat_message(mav1.MAV_TYPE_GCS, mav1.MAV_AUTOPILOT_INVALID,
+                                                             0, 0, 0, 3))
+    put(veh, 0.1, mav2.MAVLink_statustext_message(mav2.MAV_SEVERITY_INFO, b"synthetic PX4 ready"))
+    put(veh, 17.2, mav2.MAVLink_statustext_message(mav2.MAV_SEVERITY_NOTICE, b"landed, disarming"))
+    # setpoints: a slow path forward and up, 20 Hz from 4.0 s to 13.95 s
+    target = lambda t: (0.3 * (t - 4.0), 0.1 * np.sin(t), -1.5 - 0.05 * (t - 4.0))  # noqa: E731
+    for i in range(200):
+        t = 4.0 + 0.05 * i + 0.0011
+        if 11.0 < t < 11.3:
+            continue  # a 0.35 s hole in the stream
+        mask = VEL_ONLY if 9.0 <= t < 10.0 else POS_ONLY
+        x, y, z = target(t)
+        put(comp, t, mav2.MAVLink_set_position_target_local_ned_message(
+            int(t * 1000), 1, 1, mav2.MAV_FRAME_LOCAL_NED, mask, x, y, z, 0.3, 0, 0, 0, 0, 0, 0, 0))
+        fl.setpoints.append((T0_US + round(t * 1e6), mask, (float(np.float32(x)), float(np.float32(y)),
+                                                            float(np.float32(z)))))
+    # position: first-order lag towards the setpoint + noise, 50 Hz for the whole flight
+    p = np.array([0.0, 0.0, 0.0])
+    sp_now = p.copy()
+    sp_iter = iter(fl.setpoints)
+    nxt = next(sp_iter)
+    for i in range(900):
+        t = 0.02 * i + 0.0007
+        while nxt is not None and nxt[0] <= T0_US + round(t * 1e6):
+            if nxt[1] == POS_ONLY:
+                sp_now = np.array(nxt[2])
+            nxt = next(sp_iter, None)
+        p = p + 0.15 * (sp_now - p) + rng.normal(0, 0.01, 3)
+        v = 0.15 * (sp_now - p) / 0.02
+        keep = i not in (300, 301, 302, 500, 777)
+        if with_positions:
+            put(veh, t, mav2.MAVLink_local_position_ned_message(int(t * 1000), *p, *v), keep)
+            if keep:
+                fl.positions.append((T0_US + round(t * 1e6), tuple(float(np.float32(c)) for c in p)))
+        if with_truth and i % 2 == 0:
+            q = p + rng.normal(0, 0.02, 3)
+            put(tru, t + 0.0003, mav2.MAVLink_att_pos_mocap_message(int(t * 1e6), [1, 0, 0, 0], *q))
+            fl.truth.append((T0_US + round((t + 0.0003) * 1e6), tuple(float(np.float32(c)) for c in q)))
+    for t_us, _, mav, msg, keep in sorted(events, key=lambda e: e[:2]):
+        pkt = bytes(msg.pack(mav))  # like MAVLink.send: pack with the current seq, then advance it
+        mav.seq = (mav.seq + 1) % 256
+        if keep:
+            fl.records.append((t_us, pkt, msg.get_type()))
+        else:
+            fl.dropped += 1
+    return fl
+
+
+def expected_tracking(fl: Flight, samples: list[tuple[int, tuple[float, float, float]]]) -> list[float]:
+    """Independent reference: plain loops, latest position-only setpoint at or before each sample."""
+    sps = [(t, xyz) for t, mask, xyz in fl.setpoints if mask == POS_ONLY]
+    errs = []
+    for t, xyz in samples:
+        latest = None
+        for ts, sxyz in sps:
+            if ts <= t:
+                latest = sxyz
+        if latest is not None:
+            errs.append(sum((a - b) ** 2 for a, b in zip(xyz, latest, strict=True)) ** 0.5)
+    return errs
+
+
+@pytest.fixture(scope="module")
+def flight() -> Flight:
+    return synthetic_flight()
+
+
+@pytest.fixture(scope="module")
+def flight_path(tmp_path_factory, flight) -> Path:
+    path = tmp_path_factory.mktemp("tlog") / "flight.tlog"
+    path.write_bytes(flight.tlog())
+    return path
+
+
+def test_synthetic_flight_counts_and_summary(flight, flight_path):
+    rep = analyse_tlog(flight_path)
+    m = rep.metrics
+    assert rep.usable and rep.notes == []
+    by_type = {k: v["count"] for k, v in m["messages"]["by_type"].items()}
+    assert by_type == flight.counts()
+    # pymavlink's own reader sees the same messages
+    conn = mavutil.mavlink_connection(str(flight_path), dialect="ardupilotmega")
+    seen: dict[str, int] = {}
+    while (msg := conn.recv_match()) is not None:
+        seen[msg.get_type()] = seen.get(msg.get_type(), 0) + 1
+    assert seen == by_type
+    assert m["duration_s"] == pytest.approx((max(r[0] for r in flight.records) - T0_US) / 1e6)
+    assert m["vehicle"]["autopilot"] == "PX4" and m["vehicle"]["type"] == "quadrotor"
+    assert set(m["components"]) == {"1:1", "1:191", "1:197", "255:190"}
+    assert m["framing"]["mavlink1"] == 18 and m["framing"]["signed"] == len(flight.truth)
+    assert m["components"]["1:1"]["lost"] == flight.dropped == 5
+    assert m["components"]["1:191"]["lost"] == 0 and m["components"]["1:197"]["lost"] == 0
+    assert m["messages"]["by_type"]["HEARTBEAT"]["sources"] == {"1:1": 18, "1:191": 18, "255:190": 18}
+    assert [s["text"] for s in m["statustext"]] == ["synthetic PX4 ready", "landed, disarming"]
+
+
+def test_synthetic_flight_modes_and_arming(flight, flight_path):
+    m = analyse_tlog(flight_path).metrics
+    modes = [(round(e["t_s"], 4), e["mode"]) for e in m["modes"]["timeline"]]
+    assert modes == [(0.0, "POSCTL"), (2.5, "TAKEOFF"), (5.5, "OFFBOARD"), (14.5, "LAND")]
+    assert m["modes"]["mode_changes"] == 3
+    assert [(e["event"], round(e["t_s"], 4)) for e in m["arm_events"]] == [("arm", 2.5), ("disarm", 17.5)]
+    assert m["initially_armed"] is False
+    assert m["offboard"]["offboard_time_s"] == pytest.approx(14.5 - 5.5)
+
+
+def test_synthetic_flight_setpoints_and_tracking(flight, flight_path):
+    off = analyse_tlog(flight_path).metrics["offboard"]
+    sp = off["setpoints"]
+    t_sp = [t for t, _, _ in flight.setpoints]
+    assert sp["count"] == len(flight.setpoints) == 194
+    assert sp["rate_hz"] == pytest.approx((len(t_sp) - 1) / ((t_sp[-1] - t_sp[0]) / 1e6))
+    assert sp["longest_gap_s"] == pytest.approx(0.35, abs=1e-6)
+    assert sp["gaps_over_px4_timeout"] == 0
+    assert sp["position_controlled"] == sum(1 for _, mask, _ in flight.setpoints if mask == POS_ONLY)
+    errs = expected_tracking(flight, flight.positions)
+    te = off["tracking_error"]
+    assert te["n_samples"] == len(errs)
+    assert te["mean_m"] == pytest.approx(np.mean(errs), rel=1e-5)
+    assert te["max_m"] == pytest.approx(max(errs), rel=1e-5)
+    assert te["rms_m"] == pytest.approx(float(np.sqrt(np.mean(np.square(errs)))), rel=1e-5)
+    in_off = [(t, p) for t, p in flight.positions if 5.5 <= (t - T0_US) / 1e6 < 14.5]
+    assert off["tracking_error_offboard"]["mean_m"] == pytest.approx(np.mean(expected_tracking(flight, in_off)),
+                                                                     rel=1e-5)
+    truth = off["truth"]
+    assert truth["source"] == "ATT_POS_MOCAP from 1:197" and truth["samples"] == len(flight.truth)
+    terr = expected_tracking(flight, flight.truth)
+    assert truth["tracking_error"]["mean_m"] == pytest.approx(np.mean(terr), rel=1e-5)
+    assert 0.01 < truth["estimate_error"]["mean_m"] < 0.08  # truth = estimate + N(0, 0.02) per axis
+
+
+def test_truth_option_none_and_absent(flight_path, tmp_path):
+    assert analyse_tlog(flight_path, truth="none").metrics["offboard"]["truth"]["source"].startswith("disabled")
+    no_truth = tmp_path / "nt.tlog"
+    no_truth.write_bytes(synthetic_flight(with_truth=False).tlog())
+    assert analyse_tlog(no_truth).metrics["offboard"]["truth"]["source"] == "none found"
+
+
+def test_framing_crc_and_decoding_match_pymavlink():
+    """The vectorised CRC and numpy payload decoding agree with pymavlink's own on real packets."""
+    if not ARDUSUB.exists():
+        pytest.skip(f"third-party test log not found at {ARDUSUB}")
+    mav_mod = load_dialect()
+    raw = ARDUSUB.read_bytes()
+    f = scan_tlog(raw, mav_mod)
+    mav = mav_mod.MAVLink(None)
+    rng = np.random.default_rng(1)
+    for i in rng.choice(len(f), 300, replace=False).tolist() + np.flatnonzero(~f.crc_ok).tolist():
+        pkt = f.packet_bytes(i)
+        try:
+            mav.decode(bytearray(pkt))
+            ok = True
+        except Exception:  # noqa: BLE001
+            ok = False
+        assert ok == bool(f.crc_ok[i]), i
+        extra = mav_mod.mavlink_map[int(f.msgid[i])].crc_extra
+        body = pkt[1:10 + pkt[1]]
+        assert (crc_x25(bytes(body) + bytes([extra])) == (pkt[10 + pkt[1]] | pkt[11 + pkt[1]] << 8)) == ok
+    idx = np.flatnonzero((f.msgid == 32) & f.good)[:50]
+    rows = decode_columns(f, mav_mod, 32, idx)
+    for i, row in zip(idx.tolist(), rows, strict=True):
+        ref = mav.decode(f.packet_bytes(i))
+        assert row["time_boot_ms"] == ref.time_boot_ms and row["x"] == pytest.approx(ref.x, rel=1e-7)
+
+
+def test_garbage_truncation_and_unknown_ids(flight, tmp_path):
+    recs = sorted(flight.records, key=lambda r: r[0])
+    rng = np.random.default_rng(7)
+    out = bytearray()
+    garbage_at = set(rng.choice(len(recs) - 1, 12, replace=False).tolist())
+    injected = 0
+    for k, (t, pkt, _) in enumerate(recs):
+        out += struct.pack(">Q", t) + pkt
+        if k in garbage_at:
+            g = rng.integers(0, 256, int(rng.integers(1, 60)), dtype=np.uint8).tobytes()
+            if k % 3 == 0:
+                g = b"\xfd" + g  # a fake start-of-packet byte
+            out += g
+            injected += len(g)
+    # a well-framed packet with a message id no dialect knows
+    unknown = bytes([0xFD, 3, 0, 0, 0, 1, 1, 0xDE, 0xBC, 0x0A, 1, 2, 3, 0x12, 0x34])
+    out += struct.pack(">Q", recs[-1][0] + 10) + unknown
+    last = struct.pack(">Q", recs[-1][0] + 20) + recs[0][1]  # a HEARTBEAT, cut in half
+    out += last[: len(last) // 2 + 3]
+    path = tmp_path / "damaged.tlog"
+    path.write_bytes(bytes(out))
+    rep = analyse_tlog(path)
+    assert rep.usable
+    by_type = {k: v["count"] for k, v in rep.metrics["messages"]["by_type"].items()}
+    assert by_type == flight.counts()
+    fr = rep.metrics["framing"]
+    assert fr["garbage_bytes"] == injected and fr["garbage_runs"] == len(garbage_at)
+    assert fr["unknown_ids"] == {str(0x0ABCDE): 1}
+    assert fr["truncated_tail_bytes"] == len(last) // 2 + 3
+    text = " | ".join(rep.notes)
+    assert "non-MAVLink" in text and "truncated" in text and "unknown" in text
+    assert rep.metrics["offboard"]["setpoints"]["count"] == len(flight.setpoints)
+
+
+def test_no_position_messages(tmp_path):
+    path = tmp_path / "nopos.tlog"
+    path.write_bytes(synthetic_flight(with_truth=False, with_positions=False).tlog())
+    rep = analyse_tlog(path)
+    assert rep.usable and rep.metrics["offboard"]["tracking_error"] is None
+    assert any("no LOCAL_POSITION_NED" in n for n in rep.notes)
+    assert rep.metrics["offboard"]["setpoints"]["count"] == 194
+
+
+def test_empty_and_not_a_tlog(tmp_path, capsys):
+    empty = tmp_path / "empty.tlog"
+    empty.write_bytes(b"")
+    rep = analyse_tlog(empty)
+    assert not rep.usable and any("empty" in n for n in rep.notes)
+    text = tmp_path / "notes.txt"
+    text.write_bytes(b"this is not a telemetry log\n" * 400 + bytes(range(256)) * 20)
+    rep = analyse_tlog(text)
+    assert not rep.usable and any("not a tlog" in n for n in rep.notes)
+    assert main([str(empty), "--out", str(tmp_path / "o"), "--no-plots"]) == 1
+    metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
+    assert metrics["usable"] is False and metrics["notes"]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "empty" in err[0]
+
+
+def test_cli_missing_file_and_replay(tmp_path, capsys):
+    assert main([str(tmp_path / "nope.tlog")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no such file" in err[0]
+    assert main(["replay", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not available yet" in err[0]
+
+
+def test_cli_outputs(flight_path, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main([str(flight_path), "--out", str(out), "--csv", "--scene", "no_such_scene_xyz", "-q"]) == 0
+    stdout = capsys.readouterr().out
+    assert "PX4 quadrotor" in stdout and "setpoints: 194" in stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["offboard"]["setpoints"]["count"] == 194
+    assert any("--scene no_such_scene_xyz" in n for n in metrics["notes"])
+    md = (out / "report.md").read_text()
+    for png in ("trajectory.png", "altitude_speed.png", "tracking_error.png", "modes.png"):
+        assert (out / png).stat().st_size > 1000 and f"]({png})" in md
+    csv_lines = (out / "csv" / "SET_POSITION_TARGET_LOCAL_NED.csv").read_text().splitlines()
+    assert len(csv_lines) == 195 and csv_lines[0].startswith("time_unix_s,t_s,sysid,compid,time_boot_ms")
+    assert (out / "csv" / "STATUSTEXT.csv").read_text().count("synthetic PX4 ready") == 1
+
+
+def test_scene_drawing_with_a_spec(flight_path, tmp_path):
+    from types import SimpleNamespace
+
+    from tools.tlog.plots import make_plots, scene_geometry
+
+    opening = SimpleNamespace(polygon=lambda: [(-0.45, -1.95), (0.45, -1.95), (0.45, -1.05), (-0.45, -1.05)])
+    spec = SimpleNamespace(wall_x=3.0, wall_back_x=3.15, wall=SimpleNamespace(width=7.0, height=4.0, center_y=0.0),
+                           openings=(opening,))
+    geo = scene_geometry(spec)
+    assert geo["wall_x"] == 3.0 and geo["openings"][0].shape == (4, 2)
+    rep = analyse_tlog(flight_path)
+    written = make_plots(rep, tmp_path, geo)
+    assert "wall_plane" in written and (tmp_path / "trajectory.png").exists()
+
+
+def test_ardusub_third_party_log(tmp_path):
+    if not ARDUSUB.exists():
+        pytest.skip(f"third-party test log not found at {ARDUSUB}")
+    rep = analyse_tlog(ARDUSUB)
+    m = rep.metrics
+    assert rep.usable
+    assert m["vehicle"]["autopilot"] == "ArduPilot" and m["vehicle"]["type"] == "submarine"
+    assert m["vehicle"]["sysid"] == 1 and m["vehicle"]["compid"] == 1
+    assert len(m["components"]) >= 5 and m["systems"] == [1, 255]
+    assert m["offboard"]["setpoints"]["count"] == 0 and m["offboard"]["tracking_error"] is None
+    assert m["framing"]["crc_failures"] == 4
+    assert any("failed the CRC check" in n for n in rep.notes)
+    assert m["messages"]["total"] == 35912 and m["messages"]["types"] == 46
+    assert m["messages"]["by_type"]["ATTITUDE"]["count"] == 5245
+    assert m["modes"]["timeline"][0]["mode"] == "MANUAL"
+    assert [e["event"] for e in m["arm_events"]] == ["arm", "disarm"]
+    assert m["statustext"][0]["text"].startswith("ArduSub V4.1.1")
+    assert m["duration_s"] == pytest.approx(263.43, abs=0.01)
+    written = write_outputs(rep, tmp_path, plots=False)
+    assert json.loads((tmp_path / "metrics.json").read_text())["vehicle"]["type"] == "submarine"
+    assert written["plots"] == {}

@@ -1,0 +1,138 @@
+"""Command line of ``flowgap-tlog``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+from tools.tlog.analysis import TRUTH_AUTO_ORDER, analyse_tlog, finite_or_none, parse_truth_option
+
+PROG = "flowgap-tlog"
+EPILOG = f"""\
+what it reports: duration, systems/components, autopilot and vehicle type, message counts and rates,
+packet loss per link from sequence gaps, mode timeline (PX4 and ArduPilot custom modes), arm/disarm,
+STATUSTEXT; offboard setpoint rate and longest gap, time in offboard mode, position tracking error of
+LOCAL_POSITION_NED against the latest position-controlled SET_POSITION_TARGET_LOCAL_NED, and against
+ground truth when the log carries it (--truth; auto tries {', '.join(TRUTH_AUTO_ORDER)} from a component
+other than the autopilot's estimate).
+
+problems in the log (truncation, garbage, CRC failures, unknown ids, no position data) are reported as
+one-line notes on stderr and in metrics.json, never as a traceback.
+
+exit status: 0 analysed; 1 no MAVLink packets in the file (empty / not a tlog; outputs still written);
+2 usage error, missing or unreadable file, or `replay` (not available yet).
+
+examples:
+  {PROG} flight.tlog                          # summary on stdout
+  {PROG} flight.tlog --out report/ --csv      # + report.md, metrics.json, PNGs, csv/<MSG>.csv
+  {PROG} run/link.tlog --out r/ --scene gap_basic --truth att_pos_mocap
+"""
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG, formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EPILOG,
+        description="Analyse a MAVLink telemetry log (.tlog: 8-byte big-endian µs UNIX time before each "
+                    "MAVLink 1/2 packet) from flowgap, PX4 or ArduPilot: what the vehicle did, what it "
+                    f"was told, how well it followed. (`{PROG} replay RUN_DIR` is not available yet.)")
+    p.add_argument("tlog", type=Path, help="the .tlog file")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="write report.md, metrics.json and the plots here (default: summary only)")
+    p.add_argument("--csv", action="store_true", help="also write DIR/csv/<MESSAGE>.csv per message type")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots (faster)")
+    p.add_argument("--scene", metavar="NAME", help="draw this scene's wall and opening(s) (scenes.load_scene)")
+    p.add_argument("--truth", default="auto", metavar="SPEC",
+                   help="ground-truth source: auto (default), none, a name (att_pos_mocap, "
+                        "local_position_ned_cov, odometry, local_position_ned), optionally @SYSID:COMPID")
+    p.add_argument("--dialect", default="ardupilotmega",
+                   help="pymavlink v2.0 dialect to decode with (default: %(default)s, a superset of common)")
+    p.add_argument("--json", action="store_true", help="print metrics.json to stdout instead of the summary")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return p
+
+
+class _NoteFormatter(logging.Formatter):
+    def format(self, record: logging.LogRecord) -> str:
+        kind = "note" if record.levelno == logging.WARNING else record.levelname.lower()
+        return f"{PROG}: {kind}: {record.getMessage()}"
+
+
+def _setup_logging(verbose: bool) -> None:
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_NoteFormatter())
+    root = logging.getLogger("tools.tlog")
+    root.handlers[:] = [handler]
+    root.setLevel(logging.DEBUG if verbose else logging.WARNING)
+    root.propagate = False
+
+
+def _replay(argv: list[str]) -> int:
+    print(f"{PROG}: error: replay is not available yet (it needs the companion's camera and perception, "
+          "which do not exist yet)", file=sys.stderr)
+    return 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "replay":
+        return _replay(argv[1:])
+    if argv and argv[0] in ("analyse", "analyze"):
+        argv = argv[1:]
+    args = _build_parser().parse_args(argv)
+    _setup_logging(args.verbose)
+    try:
+        parse_truth_option(args.truth)
+    except ValueError as exc:
+        print(f"{PROG}: error: --truth: {exc}", file=sys.stderr)
+        return 2
+    path: Path = args.tlog
+    if not path.exists():
+        print(f"{PROG}: error: no such file: {path}", file=sys.stderr)
+        return 2
+    if not path.is_file():
+        print(f"{PROG}: error: not a file: {path}", file=sys.stderr)
+        return 2
+    try:
+        from tools.tlog.framing import load_dialect
+
+        load_dialect(args.dialect)
+    except ImportError:
+        print(f"{PROG}: error: unknown pymavlink dialect {args.dialect!r}", file=sys.stderr)
+        return 2
+    t = time.perf_counter()
+    rep = analyse_tlog(path, truth=args.truth, dialect=args.dialect,
+                       progress=not args.quiet and sys.stderr.isatty())
+    if rep.frames is None and rep.notes and rep.notes[0].startswith("cannot read"):
+        print(f"{PROG}: error: {rep.notes[0]}", file=sys.stderr)
+        return 2
+    elapsed = time.perf_counter() - t
+    written = None
+    if args.out is not None:
+        from tools.tlog.output import write_outputs
+
+        try:
+            written = write_outputs(rep, args.out, plots=not args.no_plots, csv_dir=args.csv, scene=args.scene)
+        except OSError as exc:
+            print(f"{PROG}: error: cannot write to {args.out}: {exc.strerror or exc}", file=sys.stderr)
+            return 2
+    if args.json:
+        print(json.dumps(finite_or_none(rep.to_json()), indent=2))
+    else:
+        from tools.tlog.output import summary_text
+
+        print(summary_text(rep))
+        n = rep.metrics.get("framing", {}).get("packets", 0)
+        print(f"  analysed {n} packets in {elapsed:.2f} s")
+        if written is not None:
+            extra = f", {len(written.get('csv', []))} CSV files" if args.csv else ""
+            print(f"  wrote {args.out}/report.md, metrics.json, {len(written['plots'])} plots{extra}")
+    return 0 if rep.usable else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
