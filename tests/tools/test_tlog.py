@@ -339,7 +339,7 @@ def test_cli_outputs(flight_path, tmp_path, capsys):
 def test_scene_drawing_with_a_spec(flight_path, tmp_path):
     from types import SimpleNamespace
 
-    from tools.tlog.plots import make_plots, scene_geometry
+    from tools.tlog.plots import make_plots, scene_geometry, wall_crossings
 
     opening = SimpleNamespace(polygon=lambda: [(-0.45, -1.95), (0.45, -1.95), (0.45, -1.05), (-0.45, -1.05)])
     spec = SimpleNamespace(wall_x=3.0, wall_back_x=3.15, wall=SimpleNamespace(width=7.0, height=4.0, center_y=0.0),
@@ -349,6 +349,27 @@ def test_scene_drawing_with_a_spec(flight_path, tmp_path):
     rep = analyse_tlog(flight_path)
     written = make_plots(rep, tmp_path, geo)
     assert "wall_plane" in written and (tmp_path / "trajectory.png").exists()
+    # a straight pass through the opening and one beside it
+    t = np.array([0.0, 1.0, 2.0, 3.0])
+    through = wall_crossings(t, np.array([[2.0, 0, -1.5], [2.8, 0.1, -1.5], [3.2, 0.1, -1.5], [4, 0, -1.5]]), geo)
+    assert len(through) == 1 and through[0]["through_opening"] and through[0]["t_s"] == pytest.approx(1.5)
+    beside = wall_crossings(t, np.array([[2.0, 1, -1.5], [2.8, 1, -1.5], [3.2, 1, -1.5], [4, 1, -1.5]]), geo)
+    assert len(beside) == 1 and not beside[0]["through_opening"]
+
+
+def test_scene_from_the_scenes_package(flight_path, tmp_path):
+    """--scene with the real scenes package when it is there; a one-line note when it is not."""
+    from tools.tlog.plots import load_scene_geometry
+
+    geo, note = load_scene_geometry("window1_brick")
+    if geo is None:
+        assert note.startswith("--scene window1_brick") and "\n" not in note
+        return
+    assert geo["openings"] and 0 < geo["wall_x"] < 20
+    out = tmp_path / "r"
+    assert main([str(flight_path), "--out", str(out), "--no-plots", "--scene", "window1_brick", "-q"]) == 0
+    sc = json.loads((out / "metrics.json").read_text())["scene"]
+    assert sc["name"] == "window1_brick" and "estimate_wall_crossings" in sc
 
 
 def test_ardusub_third_party_log(tmp_path):

@@ -362,7 +362,10 @@ def _events(rep: Report, f: Frames, mav_mod: Any) -> None:
 
 def _stream(f: Frames, mav: Any, name: str, src: tuple[int, int] | None = None,
             exclude: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(packet indices, decoded rows) of one message type, optionally from / not from one source."""
+    """(packet indices, decoded rows) of one message type, optionally from / not from one source.
+
+    Indices are ordered by tlog time (stable), so that time lookups work on logs whose clock steps back.
+    """
     mid = next((k for k, c in mav.mavlink_map.items() if c.msgname == name), None)
     if mid is None:
         return np.zeros(0, dtype=np.int64), np.zeros(0)
@@ -372,6 +375,7 @@ def _stream(f: Frames, mav: Any, name: str, src: tuple[int, int] | None = None,
     if exclude is not None:
         sel &= ~((f.sysid == exclude[0]) & (f.compid == exclude[1]))
     idx = np.flatnonzero(sel)
+    idx = idx[np.argsort(f.ts[idx], kind="stable")]
     return idx, decode_columns(f, mav, mid, idx)
 
 

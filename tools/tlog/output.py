@@ -134,6 +134,14 @@ def report_markdown(rep: Report, plots: dict[str, str]) -> str:
            f"- same, offboard intervals only: {_err_line(off.get('tracking_error_offboard'))}"]
     tr = off.get("truth") or {}
     md += [f"- ground truth: {tr.get('source')}"]
+    sc = m.get("scene")
+    if sc:
+        md += ["", f"## Scene `{sc['name']}`", "", f"- wall front face at x = {sc['wall_x']:.3f} m"]
+        for key, label in (("estimate_wall_crossings", "estimate"), ("truth_wall_crossings", "truth")):
+            for c in sc.get(key, []):
+                md.append(f"- {label} crosses the wall plane {c['direction']} at {c['t_s']:.2f} s, "
+                          f"(y, z) = ({c['y']:.3f}, {c['z']:.3f}) m, "
+                          + ("inside an opening" if c["through_opening"] else "OUTSIDE every opening"))
     if "tracking_error" in tr:
         md += [f"  - truth vs setpoint: {_err_line(tr.get('tracking_error'))}",
                f"  - estimate vs truth: {_err_line(tr.get('estimate_error'))}"]
@@ -185,6 +193,19 @@ def write_csvs(rep: Report, out_dir: Path) -> list[str]:
     return written
 
 
+def _scene_metrics(rep: Report, name: str, geo: dict[str, Any]) -> None:
+    from tools.tlog.plots import wall_crossings
+
+    sc: dict[str, Any] = {"name": name, "wall_x": geo["wall_x"],
+                          "openings_yz": [o.tolist() for o in geo["openings"]]}
+    s = rep.series
+    if s.get("est") is not None and len(s["est"]):
+        sc["estimate_wall_crossings"] = wall_crossings(s["t_est"], s["est"], geo)
+    if s.get("truth") is not None and len(s["truth"]):
+        sc["truth_wall_crossings"] = wall_crossings(s["t_truth"], s["truth"], geo)
+    rep.metrics["scene"] = sc
+
+
 def write_outputs(rep: Report, out_dir: str | Path, *, plots: bool = True, csv_dir: bool = False,
                   scene: str | None = None) -> dict[str, Any]:
     """Write metrics.json and report.md (+ PNGs, + csv/) into ``out_dir``; returns what was written."""
@@ -192,14 +213,16 @@ def write_outputs(rep: Report, out_dir: str | Path, *, plots: bool = True, csv_d
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Any] = {}
     pngs: dict[str, str] = {}
-    if plots and rep.usable:
-        geo = None
-        if scene:
-            from tools.tlog.plots import load_scene_geometry
+    geo = None
+    if scene and rep.usable:
+        from tools.tlog.plots import load_scene_geometry
 
-            geo, note = load_scene_geometry(scene)
-            if note:
-                rep.note(note)
+        geo, note = load_scene_geometry(scene)
+        if note:
+            rep.note(note)
+        else:
+            _scene_metrics(rep, scene, geo)
+    if plots and rep.usable:
         try:
             from tools.tlog.plots import make_plots
 

@@ -49,18 +49,52 @@ def scene_geometry(spec: Any) -> dict[str, Any]:
 
 
 def load_scene_geometry(name: str) -> tuple[dict[str, Any] | None, str | None]:
-    """(geometry, None) or (None, note) when the ``scenes`` package or the scene is unavailable."""
+    """(geometry, None) or (None, note) when the ``scenes`` package or the scene is unavailable.
+
+    Uses ``scenes.build.resolve_spec(name)`` (spec only, no splats built) when it exists, else
+    ``scenes.load_scene(name)``, which may return the spec or a ``(spec, cloud)`` tuple.
+    """
     try:
         import scenes
     except ImportError as exc:
         return None, f"--scene {name}: the scenes package is not available ({exc}); plots drawn without it"
-    loader = getattr(scenes, "load_scene", None)
+    loader = None
+    try:
+        from scenes.build import resolve_spec as loader
+    except ImportError:
+        loader = getattr(scenes, "load_scene", None)
     if loader is None:
         return None, f"--scene {name}: scenes.load_scene does not exist yet; plots drawn without the wall"
     try:
-        return scene_geometry(loader(name)), None
+        spec = loader(name)
+        if isinstance(spec, tuple):
+            spec = next((x for x in spec if hasattr(x, "wall") or hasattr(x, "wall_x")), None)
+        if spec is None:
+            return None, f"--scene {name}: no scene spec (wall, openings) for it; plots drawn without it"
+        return scene_geometry(spec), None
     except Exception as exc:  # noqa: BLE001 - any failure in a sibling package becomes a note
-        return None, f"--scene {name}: could not load the scene ({type(exc).__name__}: {exc}); plots drawn without it"
+        msg = str(exc).splitlines()[0] if str(exc) else ""
+        return None, f"--scene {name}: could not load the scene ({type(exc).__name__}: {msg}); plots drawn without it"
+
+
+def wall_crossings(t: np.ndarray, xyz: np.ndarray, geo: dict[str, Any]) -> list[dict[str, Any]]:
+    """Where a trajectory crosses the wall's front plane x = wall_x (linear interpolation), and whether
+    that point lies inside an opening: [{"t_s", "y", "z", "direction", "through_opening"}]."""
+    from matplotlib.path import Path as MplPath
+
+    if xyz.shape[0] < 2:
+        return []
+    d = xyz[:, 0] - geo["wall_x"]
+    k = np.flatnonzero((d[:-1] < 0) != (d[1:] < 0))
+    paths = [MplPath(o) for o in geo["openings"]]
+    out = []
+    for i in k.tolist():
+        a = d[i] / (d[i] - d[i + 1])
+        y, z = (xyz[i, 1:] + a * (xyz[i + 1, 1:] - xyz[i, 1:])).tolist()
+        out.append({"t_s": float(t[i] + a * (t[i + 1] - t[i])), "y": y, "z": z,
+                    "direction": "forward" if d[i + 1] > d[i] else "backward",
+                    "through_opening": any(p.contains_point((y, z)) for p in paths)})
+    return out
 
 
 def _opening_span(openings: list[np.ndarray], col: int) -> list[tuple[float, float]]:
