@@ -97,6 +97,14 @@ class QuadDynamics:
             tz += ys * km * t
         return f, tx, ty, tz
 
+    def _forces4(self, a0: float, a1: float, a2: float, a3: float) -> tuple[float, float, float, float]:
+        # quad_x rotors 1..4 at (d, d), (-d, -d), (d, -d), (-d, d); CCW, CCW, CW, CW
+        tm = self._tmax
+        t0, t1, t2, t3 = tm * a0, tm * a1, tm * a2, tm * a3
+        dx = self._geom[0][0]
+        km = self._km
+        return (t0 + t1 + t2 + t3, dx * (-t0 + t1 + t2 - t3), dx * (t0 - t1 + t2 - t3), km * (t0 + t1 - t2 - t3))
+
     def step(self, command) -> None:
         """Advance one step ``dt`` with normalised motor commands ``command`` (4 floats, clipped 0..1)."""
         dt = self.dt
@@ -104,10 +112,11 @@ class QuadDynamics:
         decay = self._lag_decay
         mean = self._lag_mean
         mot = self.motor
-        u0 = min(max(command[0], 0.0), 1.0)
-        u1 = min(max(command[1], 0.0), 1.0)
-        u2 = min(max(command[2], 0.0), 1.0)
-        u3 = min(max(command[3], 0.0), 1.0)
+        u0, u1, u2, u3 = command
+        u0 = 0.0 if u0 < 0.0 else (1.0 if u0 > 1.0 else u0)
+        u1 = 0.0 if u1 < 0.0 else (1.0 if u1 > 1.0 else u1)
+        u2 = 0.0 if u2 < 0.0 else (1.0 if u2 > 1.0 else u2)
+        u3 = 0.0 if u3 < 0.0 else (1.0 if u3 > 1.0 else u3)
         m0, m1, m2, m3 = mot
         # exact mean thrust of each motor over the step, then exact end state
         a0 = u0 + (m0 - u0) * mean
@@ -116,7 +125,7 @@ class QuadDynamics:
         a3 = u3 + (m3 - u3) * mean
         self.motor = [u0 + (m0 - u0) * decay, u1 + (m1 - u1) * decay,
                       u2 + (m2 - u2) * decay, u3 + (m3 - u3) * decay]
-        f, tx, ty, tz = self.forces((a0, a1, a2, a3))
+        f, tx, ty, tz = self._forces4(a0, a1, a2, a3)
         self.thrust_n = f
         self.torque_nm = (tx, ty, tz)
 

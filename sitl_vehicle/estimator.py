@@ -2,11 +2,12 @@
 
 Design (documented choice):
 
-* **Attitude**: the bias-corrected gyro is integrated every physics step (first-order quaternion
-  update + renormalisation). At each pose measurement (``pose_rate_hz``, mocap-like) a Mahony-style
-  complementary correction pulls the estimate towards the measured attitude by a fraction
-  ``att_gain`` of the small-angle error and integrates the same error into a gyro-bias estimate
-  (``gyro_bias_gain``). The angular velocity estimate is ``gyro - bias``.
+* **Attitude**: the bias-corrected gyro is accumulated every physics step into a delta angle (the rate
+  estimate for the rate loop is the per-step ``gyro - bias``) and the quaternion is rotated by the
+  accumulated delta angle whenever the attitude is consumed (attitude loop, KF prediction, correction).
+  At each pose measurement (``pose_rate_hz``, mocap-like) a Mahony-style complementary correction
+  pulls the estimate towards the measured attitude by a fraction ``att_gain`` of the small-angle
+  error and integrates the same error into a gyro-bias estimate (``gyro_bias_gain``).
 * **Position/velocity**: ``filterpy.kalman.KalmanFilter`` with state ``[p(3), v(3), b_a(3)]`` (NED,
   ``b_a`` an accelerometer bias expressed in NED, a random walk). Prediction runs at the estimator
   rate (``rate_hz``, 100 Hz like PX4 EKF2) with the interval-averaged accelerometer rotated to NED by
@@ -61,27 +62,45 @@ class Estimator:
         self.q = tuple(float(c) for c in attitude)
         self.gyro_bias = (0.0, 0.0, 0.0)
         self.omega = (0.0, 0.0, 0.0)
+        self._dangle = [0.0, 0.0, 0.0]
         self.position = tuple(float(c) for c in position)
         self.velocity = (0.0, 0.0, 0.0)
         self.acceleration = (0.0, 0.0, 0.0)
 
     # ------------------------------------------------------------------ attitude
-    def integrate_gyro(self, gyro, dt: float) -> None:
-        """Physics-rate attitude propagation with the bias-corrected gyro."""
+    def add_gyro(self, gyro, dt: float) -> None:
+        """Physics-rate gyro sample: sets the rate estimate and accumulates the delta angle (PX4-style
+        IMU integration); the attitude itself is propagated by :meth:`propagate` when it is needed."""
         b = self.gyro_bias
         wx, wy, wz = gyro[0] - b[0], gyro[1] - b[1], gyro[2] - b[2]
         self.omega = (wx, wy, wz)
-        qw, qx, qy, qz = self.q
-        h = 0.5 * dt
-        nw = qw + h * (-qx * wx - qy * wy - qz * wz)
-        nx = qx + h * (qw * wx + qy * wz - qz * wy)
-        ny = qy + h * (qw * wy - qx * wz + qz * wx)
-        nz = qz + h * (qw * wz + qx * wy - qy * wx)
-        n = 1.0 / math.sqrt(nw * nw + nx * nx + ny * ny + nz * nz)
-        self.q = (nw * n, nx * n, ny * n, nz * n)
+        da = self._dangle
+        da[0] += wx * dt
+        da[1] += wy * dt
+        da[2] += wz * dt
+
+    def propagate(self) -> None:
+        """Rotate the attitude estimate by the accumulated delta angle (exact exponential map)."""
+        da = self._dangle
+        ax, ay, az = da
+        if ax == 0.0 and ay == 0.0 and az == 0.0:
+            return
+        da[0] = da[1] = da[2] = 0.0
+        ang = math.sqrt(ax * ax + ay * ay + az * az)
+        h = 0.5 * ang
+        k = math.sin(h) / ang
+        qw, qx, qy, qz = qmul(self.q, (math.cos(h), ax * k, ay * k, az * k))
+        n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        self.q = (qw * n, qx * n, qy * n, qz * n)
+
+    def integrate_gyro(self, gyro, dt: float) -> None:
+        """Gyro sample + immediate attitude propagation."""
+        self.add_gyro(gyro, dt)
+        self.propagate()
 
     def correct_attitude(self, q_meas, dt_meas: float) -> None:
         """Complementary correction towards a measured attitude (Mahony-style, with gyro-bias learning)."""
+        self.propagate()
         e = qmul(qconj(self.q), q_meas)
         if e[0] < 0.0:
             e = (-e[0], -e[1], -e[2], -e[3])
@@ -97,6 +116,7 @@ class Estimator:
     # ------------------------------------------------------------------ position / velocity
     def predict(self, accel_body) -> None:
         """KF prediction over one estimator interval with the mean body specific force (m/s^2)."""
+        self.propagate()
         f = qrotate(self.q, accel_body)
         u = self._u
         u[0] = f[0]

@@ -175,6 +175,7 @@ class VehicleSim:
         e = self.estimator
         if e is None:
             return self.truth
+        e.propagate()
         return VehicleState(e.position, e.velocity, e.q, e.omega)
 
     @property
@@ -285,7 +286,7 @@ class VehicleSim:
         dyn = self.dyn
         est = self.estimator
         if est is not None:
-            est.integrate_gyro(self.imu.gyro(dyn.x[10:13]), self.dt)
+            est.add_gyro(self.imu.gyro(dyn.x[10:13]), self.dt)
             if k % self._est_div == 0:
                 v = dyn.velocity
                 vm = self._v_mark
@@ -303,7 +304,11 @@ class VehicleSim:
             if k % self._pos_div == 0:
                 self._position_loop()
             if k % self._att_div == 0:
-                q = est.q if est is not None else dyn.attitude
+                if est is not None:
+                    est.propagate()
+                    q = est.q
+                else:
+                    q = dyn.attitude
                 self._rate_sp = self.att_ctl.update(q, self._q_sp, self._yaw_rate_ff)
             omega = est.omega if est is not None else dyn.angular_velocity
             landed = dyn.on_ground

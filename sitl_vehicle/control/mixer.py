@@ -81,7 +81,16 @@ class Mixer:
         """Motor commands in [0, 1] for collective thrust (N) and body torques (N*m)."""
         mt, mr, mp, my = self._mix
         tx, ty, tz = torque
-        u = [mt[i] * thrust_n + mr[i] * tx + mp[i] * ty for i in range(4)]
+        u0 = mt[0] * thrust_n + mr[0] * tx + mp[0] * ty
+        u1 = mt[1] * thrust_n + mr[1] * tx + mp[1] * ty
+        u2 = mt[2] * thrust_n + mr[2] * tx + mp[2] * ty
+        u3 = mt[3] * thrust_n + mr[3] * tx + mp[3] * ty
+        y0, y1, y2, y3 = u0 + my[0] * tz, u1 + my[1] * tz, u2 + my[2] * tz, u3 + my[3] * tz
+        if (0.0 <= y0 <= 1.0 and 0.0 <= y1 <= 1.0 and 0.0 <= y2 <= 1.0 and 0.0 <= y3 <= 1.0):
+            # nothing saturates: every desaturation gain below would be zero
+            self.saturation_positive = self.saturation_negative = (False, False, False)
+            return [y0, y1, y2, y3]
+        u = [u0, u1, u2, u3]
         dt_, dr, dp, dy = self._dirs
         _desaturate(u, dt_, reduce_only=True)
         _desaturate(u, dr)

@@ -55,14 +55,20 @@ class RateControl:
             df[0] += a * ((rate[0] - prev[0]) * inv - df[0])
             df[1] += a * ((rate[1] - prev[1]) * inv - df[1])
             df[2] += a * ((rate[2] - prev[2]) * inv - df[2])
-        p, ki, d, ff, lim, it = self._p, self._i, self._d, self._ff, self._lim, self._int
-        out = [0.0, 0.0, 0.0]
-        for k in range(3):
-            e = rate_sp[k] - rate[k]
-            out[k] = p[k] * e + it[k] - d[k] * df[k] + ff[k] * rate_sp[k]
-            if update_integral:
-                if (e > 0.0 and self._sat_pos[k]) or (e < 0.0 and self._sat_neg[k]):
+        p, ki, d, ff = self._p, self._i, self._d, self._ff
+        it = self._int
+        e0 = rate_sp[0] - rate[0]
+        e1 = rate_sp[1] - rate[1]
+        e2 = rate_sp[2] - rate[2]
+        out = (p[0] * e0 + it[0] - d[0] * df[0] + ff[0] * rate_sp[0],
+               p[1] * e1 + it[1] - d[1] * df[1] + ff[1] * rate_sp[1],
+               p[2] * e2 + it[2] - d[2] * df[2] + ff[2] * rate_sp[2])
+        if update_integral:
+            lim = self._lim
+            sp, sn = self._sat_pos, self._sat_neg
+            for k, e in ((0, e0), (1, e1), (2, e2)):
+                if (e > 0.0 and sp[k]) or (e < 0.0 and sn[k]):
                     continue
                 v = it[k] + ki[k] * e * dt
-                it[k] = min(max(v, -lim[k]), lim[k])
-        return out[0], out[1], out[2]
+                it[k] = -lim[k] if v < -lim[k] else (lim[k] if v > lim[k] else v)
+        return out
