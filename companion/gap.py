@@ -129,9 +129,11 @@ class ParallaxGapConfig:
 
     vfov_deg: float = 75.0            # used when no focal length is given (flowgap default camera)
     min_g_frac: float = 0.08          # |g| below this fraction of its max is "too close to the FoE": filled
-    median_ksize: int = 5             # smoothing of the inverse-depth image
-    robust_percentiles: tuple[float, float] = (1.0, 99.0)   # inverse depth → 8 bit for Otsu
-    min_contrast: float = 1.5         # near/far inverse-depth ratio below which there is no gap
+    median_ksize: int = 5             # smoothing of the 8-bit log-inverse-depth image
+    robust_percentiles: tuple[float, float] = (0.5, 99.5)   # log inverse depth → 8 bit
+    min_contrast: float = 1.25        # a split is real when the classes' median inverse depths differ this much
+    min_separability: float = 0.7     # ... and Otsu's between/total variance ratio is at least this
+    max_splits: int = 4               # nearest surfaces peeled off (floor, wall, ...) before the farthest class
     open_ksize: int = 5               # opening (remove specks) then closing of the far mask
     close_ksize: int = 7
     area_min_frac: float = 0.001
@@ -214,9 +216,56 @@ def inverse_depth_from_flow(flow: np.ndarray, motion: CameraMotion = CameraMotio
     return rho, valid
 
 
+def _otsu_split(values: np.ndarray) -> tuple[int, float]:
+    """Otsu threshold of 8-bit ``values`` (1-D) and its separability η = σ²_between / σ²_total."""
+    t, _ = cv2.threshold(values.reshape(-1, 1), 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    low = values <= t
+    total = values.var()
+    if total <= 0 or low.all() or not low.any():
+        return int(t), 0.0
+    w0 = low.mean()
+    between = w0 * (1 - w0) * (values[low].mean() - values[~low].mean()) ** 2
+    return int(t), float(between / total)
+
+
+def far_region(log_img: np.ndarray, log_step: float, config: ParallaxGapConfig) -> tuple[np.ndarray | None, str]:
+    """The farthest significantly distinct class of an 8-bit log-inverse-depth image (or None, reason).
+
+    Otsu splits the image into near and far, then splits the far class again, and so on (``max_splits``
+    times), peeling off nearer surfaces (floor, then wall).  Of the *significant* splits (median inverse
+    depths differ by ``min_contrast`` and η ≥ ``min_separability``) the one with the largest contrast is the
+    depth step at the opening; its far class is what lies beyond.  A floor ramp may give a weak first split
+    and a sharp second one, so weak splits do not stop the descent; splits of one surface's noise are weak.
+    """
+    region = np.ones(log_img.shape, bool)
+    far = None
+    reason = "no depth contrast"
+    a_min = config.area_min_frac * log_img.size
+    best = (0.0, 0.0)
+    best_contrast = 0.0
+    for _ in range(config.max_splits):
+        values = log_img[region]
+        t, eta = _otsu_split(values)
+        low = values <= t
+        if low.all() or not low.any() or low.sum() < a_min:
+            break
+        contrast = float(np.exp((np.median(values[~low]) - np.median(values[low])) * log_step))
+        new_region = np.zeros_like(region)
+        new_region[region] = low
+        region = new_region
+        if contrast >= config.min_contrast and eta >= config.min_separability:
+            if contrast > best_contrast:
+                far, best_contrast = region, contrast
+        elif far is None and contrast * eta > best[0] * best[1]:
+            best = (contrast, eta)
+    if far is None:
+        reason = f"no depth contrast (best split: inverse-depth ratio {best[0]:.2f}, separability {best[1]:.2f})"
+    return far, reason
+
+
 def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGapConfig(),
                         motion: CameraMotion = CameraMotion()) -> GapDetection:
-    """Our detector: Otsu on inverse depth from flow under translation (see module docstring)."""
+    """Our detector: the farthest region of the inverse depth read from flow (see module docstring)."""
     det = "parallax"
     flow = np.asarray(flow, dtype=np.float32)
     h, w = flow.shape[:2]
@@ -226,24 +275,22 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
     rho, valid = inverse_depth_from_flow(flow, motion, config)
     if valid.sum() < 0.2 * h * w:
         return _no_gap((h, w), "too few pixels away from the focus of expansion", det)
-    lo, hi = np.percentile(rho[valid], config.robust_percentiles)
-    if not hi > 0:
-        return _no_gap((h, w), "no positive inverse depth (motion not translation-like)", det)
-    # 8-bit inverse depth; pixels near the FoE are inpainted from their neighbours.
-    scaled = np.clip((np.nan_to_num(rho, nan=lo) - lo) / max(hi - lo, 1e-12), 0, 1)
-    img = (255 * scaled).astype(np.uint8)
-    if not valid.all():
-        img = cv2.inpaint(img, (~valid).astype(np.uint8), 5, cv2.INPAINT_TELEA)
+    positive = valid & (rho > 0)
+    if positive.sum() < 0.5 * valid.sum():
+        return _no_gap((h, w), "inverse depth mostly negative (motion not translation-like)", det)
+    log_rho = np.log(np.where(positive, rho, np.nan))
+    lo, hi = np.nanpercentile(log_rho[positive], config.robust_percentiles)
+    span = max(float(hi - lo), 1e-6)
+    # 8-bit log inverse depth; pixels near the FoE (or with ρ ≤ 0) are inpainted from their neighbours.
+    img = (255 * np.clip((np.nan_to_num(log_rho, nan=lo) - lo) / span, 0, 1)).astype(np.uint8)
+    if not positive.all():
+        img = cv2.inpaint(img, (~positive).astype(np.uint8), 5, cv2.INPAINT_TELEA)
     if config.median_ksize > 1:
         img = cv2.medianBlur(img, config.median_ksize)
-    otsu, far = cv2.threshold(img, 0, 1, cv2.THRESH_BINARY_INV + cv2.THRESH_OTSU)
-    # contrast check: is there a real depth step between the two classes?
-    rho_s = lo + img.astype(np.float64) / 255.0 * (hi - lo)
-    near_med = np.median(rho_s[far == 0]) if (far == 0).any() else 0.0
-    far_med = np.median(rho_s[far == 1]) if (far == 1).any() else 0.0
-    if near_med <= 0 or near_med < config.min_contrast * max(far_med, 1e-12 * near_med):
-        return _no_gap((h, w), f"no depth contrast (near/far inverse depth {near_med:.3g}/{far_med:.3g})",
-                       det)
+    far, reason = far_region(img, span / 255.0, config)
+    if far is None:
+        return _no_gap((h, w), reason, det)
+    far = far.astype(np.uint8)
     far = cv2.morphologyEx(far, cv2.MORPH_OPEN, cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (config.open_ksize, config.open_ksize)))
     far = cv2.morphologyEx(far, cv2.MORPH_CLOSE, cv2.getStructuringElement(
