@@ -206,7 +206,9 @@ class PositionControl:
         """Acceleration setpoint -> normalised thrust vector (PX4 _accelerationControl)."""
         g = GRAVITY
         zf = -g + acc_sp[2]
-        bx, by, bz = -acc_sp[0], -acc_sp[1], -zf
+        # a downward acceleration beyond ~free fall cannot be produced by thrust: keep the thrust axis
+        # pointing up (PX4's limitTilt would otherwise tilt an upside-down axis 45 deg north)
+        bx, by, bz = -acc_sp[0], -acc_sp[1], max(-zf, 0.1 * g)
         n = math.sqrt(bx * bx + by * by + bz * bz)
         if not n > 0.0:
             bx, by, bz, n = 0.0, 0.0, 1.0, 1.0
