@@ -1,0 +1,173 @@
+"""``flowgap-vehicle`` / ``python -m sitl_vehicle``: the simulated PX4 flight controller process."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import signal
+import sys
+import threading
+from pathlib import Path
+
+from sitl_vehicle.airframes import AIRFRAMES
+from sitl_vehicle.mavlink_io import Home, PortInUseError, parse_hostport
+from sitl_vehicle.params import COMMANDER_PARAMS, ParameterError
+from sitl_vehicle.server import ServerConfig, VehicleServer
+from sitl_vehicle.sim import VehicleConfig
+
+log = logging.getLogger("flowgap-vehicle")
+
+EPILOG = """\
+ports (as PX4 SITL; --instance N adds N to every port but the GCS remote):
+  GCS link     local 18570 -> 127.0.0.1:14550 (QGroundControl, MAVProxy)
+  API link     local 14580 -> 127.0.0.1:14540 (MAVSDK, pymavlink, the flowgap companion)
+  truth stream          ->   127.0.0.1:14560 (simulation only: ODOMETRY with the true pose)
+The vehicle sends first and locks onto the first peer that answers on each link.
+
+examples:
+  flowgap-vehicle                                 # real time, default ports
+  flowgap-vehicle --speed 4 --no-noise            # 4x real time with exact-truth telemetry
+  flowgap-vehicle --scene window1_brick --result runs/verdict.json
+  flowgap-vehicle --param MIS_TAKEOFF_ALT=1.5 --param COM_OBL_RC_ACT=4
+"""
+
+
+class CliError(Exception):
+    """Bad command-line input; printed as one line."""
+
+
+def _triple(text: str) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r} must be three comma-separated numbers, e.g. 0,0,0")
+    return values  # type: ignore[return-value]
+
+
+def _param(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    try:
+        return name.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} must look like NAME=VALUE, e.g. MIS_TAKEOFF_ALT=1.5") from None
+
+
+def _address(text: str) -> tuple[str, int]:
+    try:
+        return parse_hostport(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="flowgap-vehicle",
+        description="A simulated PX4 quadrotor: rigid-body dynamics, PX4's control cascade, a noisy-sensor "
+                    "Kalman estimator, PX4 flight modes and failsafes, speaking MAVLink 2 over UDP.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sim = p.add_argument_group("simulation")
+    sim.add_argument("--airframe", choices=sorted(AIRFRAMES), default="quad250", help="airframe (default %(default)s)")
+    sim.add_argument("--speed", type=float, default=1.0, help="simulation seconds per wall second (default 1)")
+    sim.add_argument("--no-noise", action="store_true", help="exact-truth sensors and estimate (for tests)")
+    sim.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
+    sim.add_argument("--start", type=_triple, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
+                     help="start position NED in metres (default 0,0,0: on the ground at the origin)")
+    sim.add_argument("--yaw", type=float, default=0.0, help="start heading in degrees (default 0: north)")
+    sim.add_argument("--scene", help="scene name or path: load its collision geometry (default: ground only)")
+    sim.add_argument("--duration", type=float, help="stop after this many simulation seconds")
+    sim.add_argument("--result", type=Path, help="write the ground-truth verdict JSON here at exit")
+    sim.add_argument("--home", type=_triple, default=None, metavar="LAT,LON,ALT",
+                     help="home position (default PX4 SITL's 47.397742,8.545594,488)")
+    sim.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE",
+                     help="set a PX4 parameter at boot (repeatable); known: "
+                          + ", ".join(s.name for s in COMMANDER_PARAMS))
+    net = p.add_argument_group("MAVLink addresses")
+    net.add_argument("--instance", type=int, default=0, help="PX4-style instance number: offsets the ports")
+    net.add_argument("--gcs-local", type=_address, help="GCS link local address (default 0.0.0.0:18570+N)")
+    net.add_argument("--gcs-remote", type=_address, help="GCS link first remote (default 127.0.0.1:14550)")
+    net.add_argument("--api-local", type=_address, help="API link local address (default 0.0.0.0:14580+N)")
+    net.add_argument("--api-remote", type=_address, help="API link first remote (default 127.0.0.1:14540+N)")
+    net.add_argument("--truth-remote", type=_address, help="ground-truth stream target (default 127.0.0.1:14560+N)")
+    net.add_argument("--truth-hz", type=float, default=100.0, help="ground-truth stream rate (default 100)")
+    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return p
+
+
+def config_from_args(args: argparse.Namespace) -> ServerConfig:
+    if not args.speed > 0 or not math.isfinite(args.speed):
+        raise CliError(f"--speed must be a positive number, got {args.speed}")
+    if not 0 <= args.instance < 100:
+        raise CliError(f"--instance must be between 0 and 99, got {args.instance}")
+    n = args.instance
+    vehicle = VehicleConfig(airframe=AIRFRAMES[args.airframe])
+    if args.no_noise:
+        vehicle = _replace(vehicle, noise=None)
+    home = Home(*args.home) if args.home else Home()
+    return ServerConfig(
+        vehicle=vehicle,
+        gcs_local=args.gcs_local or ("0.0.0.0", 18570 + n),
+        gcs_remote=args.gcs_remote or ("127.0.0.1", 14550),
+        api_local=args.api_local or ("0.0.0.0", 14580 + n),
+        api_remote=args.api_remote or ("127.0.0.1", 14540 + n),
+        truth_remote=args.truth_remote or ("127.0.0.1", 14560 + n),
+        truth_hz=args.truth_hz, speed=args.speed, seed=args.seed,
+        start_position=args.start, start_yaw=math.radians(args.yaw), home=home,
+        params=tuple(args.param), scene=args.scene,
+    )
+
+
+def _replace(obj, **changes):
+    import dataclasses
+
+    return dataclasses.replace(obj, **changes)
+
+
+def load_world(scene: str | None):
+    if scene is None:
+        return None
+    try:
+        from scenes.collision import load_collision
+    except ImportError as exc:
+        raise CliError(f"--scene needs the scenes package's collision geometry, not available here ({exc})") from None
+    try:
+        return load_collision(scene)
+    except (FileNotFoundError, KeyError, ValueError) as exc:
+        raise CliError(f"cannot load scene {scene!r}: {exc}") from None
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=args.log_level, format="%(asctime)s vehicle %(levelname)s %(message)s")
+    stop = threading.Event()
+    try:
+        config = config_from_args(args)
+        server = VehicleServer(config, world=load_world(config.scene))
+    except (CliError, ParameterError, PortInUseError) as exc:
+        print(f"flowgap-vehicle: error: {exc}", file=sys.stderr)
+        return 2
+
+    def _on_signal(signum, _frame):
+        log.info("%s received: stopping", signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGINT, _on_signal)
+    signal.signal(signal.SIGTERM, _on_signal)
+    log.info("vehicle up: GCS %s:%d, API %s:%d, truth -> %s, speed x%g", *server.address("gcs"),
+             *server.address("api"), config.truth_remote, config.speed)
+    try:
+        verdict = server.run(duration_s=args.duration, stop=stop)
+    finally:
+        server.close()
+    if args.result:
+        server.write_result(args.result)
+        log.info("verdict written to %s", args.result)
+    log.info("stopped at t=%.2f s: collision=%s crossed_wall=%s", verdict["sim_time_s"], verdict["collision"],
+             verdict["crossed_wall"])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,243 @@
+"""Commander: flight modes, arming and failsafes with PX4 semantics, as a pure state machine.
+
+The commander owns no clock and no sockets. The MAVLink edge calls its request methods when commands
+arrive and ``update`` once per control tick with the vehicle's status; it answers with a ``Reply``
+(a MAV_RESULT plus the reason PX4 would print) and, from ``update``, the armed state and setpoint the
+vehicle core must fly. STATUSTEXT lines it wants sent are queued in ``messages``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_vehicle.modes import FlightMode
+from sitl_vehicle.params import ParameterStore
+from sitl_vehicle.sim import Setpoint
+
+log = logging.getLogger(__name__)
+NAN = math.nan
+
+OBL_ACTION_LAND = 4  # COM_OBL_RC_ACT value for Land; everything else holds position
+
+
+@dataclass(frozen=True)
+class VehicleStatus:
+    """What the commander may know about the vehicle: the estimate, not the truth."""
+
+    time_s: float
+    position: tuple[float, float, float]
+    velocity: tuple[float, float, float]
+    yaw: float
+    armed: bool
+    landed: bool
+    crashed: bool = False
+    position_valid: bool = True
+
+
+@dataclass(frozen=True)
+class Reply:
+    result: int  # MAV_RESULT
+    text: str | None = None  # reason, also sent as STATUSTEXT when the command is refused
+
+    @property
+    def accepted(self) -> bool:
+        return self.result == mavlink.MAV_RESULT_ACCEPTED
+
+
+ACCEPTED = Reply(mavlink.MAV_RESULT_ACCEPTED)
+
+
+@dataclass(frozen=True)
+class CommanderOutput:
+    armed: bool
+    setpoint: Setpoint
+    mode: FlightMode
+
+
+class Commander:
+    """PX4-like commander/navigator for Takeoff, Hold, Land and Offboard."""
+
+    def __init__(self, params: ParameterStore, home: tuple[float, float, float] = (0.0, 0.0, 0.0)):
+        self.params = params
+        self.home = home
+        self.mode = FlightMode.AUTO_LOITER
+        self.armed = False
+        self.failsafe = False
+        self.messages: deque[tuple[int, str]] = deque(maxlen=64)
+        self._armed_at = 0.0
+        self._has_flown = False
+        self._landed_since: float | None = None
+        self._hold_target: tuple[float, float, float] | None = None
+        self._hold_yaw = 0.0
+        self._takeoff_target: tuple[float, float, float] | None = None
+        self._land_xy: tuple[float, float] | None = None
+        self._offboard_setpoint: Setpoint | None = None
+        self._offboard_time = -math.inf
+
+    # ----------------------------------------------------------------------------------- requests
+    def arm(self, status: VehicleStatus, force: bool = False) -> Reply:
+        if self.armed:
+            return ACCEPTED
+        if not force:
+            reason = self._arming_denied_reason(status)
+            if reason:
+                return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, f"Arming denied: {reason}")
+        self.armed = True
+        self._armed_at = status.time_s
+        self._has_flown = False
+        self._landed_since = status.time_s if status.landed else None
+        self.failsafe = False
+        self._enter(self.mode, status)
+        self._say(mavlink.MAV_SEVERITY_INFO, "Armed by external command")
+        return ACCEPTED
+
+    def disarm(self, status: VehicleStatus, force: bool = False) -> Reply:
+        if not self.armed:
+            return ACCEPTED
+        if not status.landed and not force:
+            return self._refuse(mavlink.MAV_RESULT_DENIED, "Disarming denied: not landed")
+        self._disarm("Disarmed by external command")
+        return ACCEPTED
+
+    def set_mode(self, mode: FlightMode, status: VehicleStatus) -> Reply:
+        if mode is FlightMode.OFFBOARD and not self._offboard_alive(status.time_s):
+            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED,
+                                "Switching to Offboard is currently not possible: no setpoint stream")
+        if mode is FlightMode.AUTO_TAKEOFF:
+            return self.takeoff(status, NAN)
+        self.failsafe = False
+        self._enter(mode, status)
+        return ACCEPTED
+
+    def takeoff(self, status: VehicleStatus, altitude_above_home: float) -> Reply:
+        if not self.armed:
+            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Takeoff denied: arm first")
+        if not math.isfinite(altitude_above_home):
+            altitude_above_home = self.params["MIS_TAKEOFF_ALT"]
+        if altitude_above_home <= 0:
+            return self._refuse(mavlink.MAV_RESULT_DENIED,
+                                f"Takeoff denied: altitude {altitude_above_home:.2f} m is not above home")
+        x, y, _ = status.position
+        self._takeoff_target = (x, y, self.home[2] - altitude_above_home)
+        self._enter(FlightMode.AUTO_TAKEOFF, status)
+        self._say(mavlink.MAV_SEVERITY_INFO, f"Takeoff to {altitude_above_home:.1f} m above home")
+        return ACCEPTED
+
+    def land(self, status: VehicleStatus) -> Reply:
+        self._enter(FlightMode.AUTO_LAND, status)
+        return ACCEPTED
+
+    def offboard_setpoint(self, setpoint: Setpoint, time_s: float) -> None:
+        """A valid offboard setpoint arrived (the MAVLink edge has already rejected malformed ones)."""
+        self._offboard_setpoint = setpoint
+        self._offboard_time = time_s
+
+    # ------------------------------------------------------------------------------------ update
+    def update(self, status: VehicleStatus) -> CommanderOutput:
+        now = status.time_s
+        if status.crashed and self.armed:
+            self._disarm("Crash detected: motors stopped")
+        if self.armed:
+            self._update_land_detector(status)
+        if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(now):
+            self._offboard_lost(status)
+        if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
+            if abs(status.position[2] - self._takeoff_target[2]) <= self.params["NAV_ACC_RAD"]:
+                self._say(mavlink.MAV_SEVERITY_INFO, "Takeoff complete: holding")
+                self._hold_target, self._hold_yaw = self._takeoff_target, status.yaw
+                self.mode = FlightMode.AUTO_LOITER
+        return CommanderOutput(self.armed, self._setpoint(status), self.mode)
+
+    # ---------------------------------------------------------------------------------- internals
+    def _setpoint(self, status: VehicleStatus) -> Setpoint:
+        if self.mode is FlightMode.OFFBOARD and self._offboard_setpoint is not None:
+            return self._offboard_setpoint
+        if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
+            return Setpoint(position=self._takeoff_target, yaw=self._hold_yaw)
+        if self.mode is FlightMode.AUTO_LAND or (status.landed and not self._climb_requested()):
+            # Descend (on the ground: keep pressing down, so the thrust winds down to idle).
+            x, y = self._land_xy or status.position[:2]
+            return Setpoint(position=(x, y, NAN), velocity=(NAN, NAN, self.params["MPC_LAND_SPEED"]),
+                            yaw=self._hold_yaw)
+        target = self._hold_target or status.position
+        return Setpoint(position=target, yaw=self._hold_yaw)
+
+    def _climb_requested(self) -> bool:
+        return self.mode is FlightMode.AUTO_LOITER and self._hold_target is not None and self._has_flown
+
+    def _enter(self, mode: FlightMode, status: VehicleStatus) -> None:
+        if mode is not self.mode:
+            log.info("mode %s -> %s", self.mode.label, mode.label)
+        self.mode = mode
+        self._hold_yaw = status.yaw
+        if mode is FlightMode.AUTO_LOITER:
+            self._hold_target = _stopping_point(status.position, status.velocity)
+        elif mode is FlightMode.AUTO_LAND:
+            self._land_xy = status.position[:2]
+
+    def _update_land_detector(self, status: VehicleStatus) -> None:
+        now = status.time_s
+        if not status.landed:
+            self._has_flown = True
+            self._landed_since = None
+            return
+        if self._landed_since is None:
+            self._landed_since = now
+            if self._has_flown:
+                self._say(mavlink.MAV_SEVERITY_INFO, "Landing detected")
+        landed_for = now - self._landed_since
+        if self._has_flown:
+            delay = self.params["COM_DISARM_LAND"]
+            if delay >= 0 and landed_for >= delay:
+                self._disarm("Disarmed by landing")
+        else:
+            delay = self.params["COM_DISARM_PRFLT"]
+            if delay >= 0 and now - self._armed_at >= delay and self.mode is not FlightMode.AUTO_TAKEOFF:
+                self._disarm("Disarmed: no takeoff after arming")
+
+    def _offboard_lost(self, status: VehicleStatus) -> None:
+        self.failsafe = True
+        action = int(self.params["COM_OBL_RC_ACT"])
+        target = FlightMode.AUTO_LAND if action == OBL_ACTION_LAND else FlightMode.AUTO_LOITER
+        self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: offboard lost, switching to {target.label}")
+        self._enter(target, status)
+
+    def _offboard_alive(self, now: float) -> bool:
+        return now - self._offboard_time <= self.params["COM_OF_LOSS_T"]
+
+    def _arming_denied_reason(self, status: VehicleStatus) -> str | None:
+        if status.crashed:
+            return "vehicle crashed; restart the simulation"
+        if not status.position_valid:
+            return "position estimate not valid yet"
+        if not status.landed:
+            return "vehicle is not landed"
+        if self.mode is FlightMode.AUTO_LAND:
+            return "Land mode is not armable; switch to Hold or Offboard"
+        if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(status.time_s):
+            return "no offboard setpoint stream"
+        return None
+
+    def _disarm(self, text: str) -> None:
+        self.armed = False
+        self._has_flown = False
+        self._landed_since = None
+        self._say(mavlink.MAV_SEVERITY_INFO, text)
+
+    def _refuse(self, result: int, text: str) -> Reply:
+        self._say(mavlink.MAV_SEVERITY_CRITICAL, text)
+        return Reply(result, text)
+
+    def _say(self, severity: int, text: str) -> None:
+        log.info("%s", text)
+        self.messages.append((severity, text))
+
+
+def _stopping_point(position, velocity, decel: float = 2.0) -> tuple[float, float, float]:
+    """Where the vehicle comes to rest braking at ``decel`` m/s² — PX4's Hold stops, it does not go back."""
+    return tuple(p + v * abs(v) / (2.0 * decel) for p, v in zip(position, velocity, strict=True))

@@ -1,0 +1,78 @@
+"""PX4 flight modes and their MAVLink encoding (HEARTBEAT base_mode / custom_mode).
+
+PX4 packs its mode into HEARTBEAT.custom_mode as main mode in bits 16–23 and sub mode in bits 24–31
+(px4_custom_mode.h). Clients such as MAVSDK, QGroundControl and pymavlink's ``interpret_px4_mode`` decode
+the mode from these bits alone, so they are the contract; base_mode carries the armed flag and the
+generic capability flags PX4 sets for each mode.
+"""
+
+from __future__ import annotations
+
+import enum
+
+from pymavlink.dialects.v20 import common as mavlink
+
+# PX4 main modes (px4_custom_mode.h)
+MAIN_MANUAL = 1
+MAIN_ALTCTL = 2
+MAIN_POSCTL = 3
+MAIN_AUTO = 4
+MAIN_ACRO = 5
+MAIN_OFFBOARD = 6
+MAIN_STABILIZED = 7
+
+# PX4 AUTO sub modes
+SUB_AUTO_READY = 1
+SUB_AUTO_TAKEOFF = 2
+SUB_AUTO_LOITER = 3
+SUB_AUTO_MISSION = 4
+SUB_AUTO_RTL = 5
+SUB_AUTO_LAND = 6
+
+
+class FlightMode(enum.Enum):
+    """The modes this vehicle flies; value = (main mode, sub mode, name as PX4 prints it)."""
+
+    AUTO_TAKEOFF = (MAIN_AUTO, SUB_AUTO_TAKEOFF, "Takeoff")
+    AUTO_LOITER = (MAIN_AUTO, SUB_AUTO_LOITER, "Hold")
+    AUTO_LAND = (MAIN_AUTO, SUB_AUTO_LAND, "Land")
+    OFFBOARD = (MAIN_OFFBOARD, 0, "Offboard")
+
+    @property
+    def custom_mode(self) -> int:
+        main, sub, _ = self.value
+        return (main << 16) | (sub << 24)
+
+    @property
+    def label(self) -> str:
+        return self.value[2]
+
+    @property
+    def base_mode_flags(self) -> int:
+        """The generic base_mode flags PX4 reports for this mode (without the armed flag)."""
+        return (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+                | mavlink.MAV_MODE_FLAG_AUTO_ENABLED | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED)
+
+
+class UnsupportedMode(ValueError):
+    """A mode request names a PX4 mode this vehicle does not fly."""
+
+
+def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
+    """Map a DO_SET_MODE (custom main, custom sub) pair to a FlightMode.
+
+    PX4 treats AUTO with sub mode 0 as Hold-like ready state; we map it to Hold. Modes that need an RC
+    link (Manual, Stabilized, Acro, Altitude, Position) are refused, as PX4 refuses them without RC;
+    Mission and Return are not implemented (the README says so).
+    """
+    for mode in FlightMode:
+        main, sub, _ = mode.value
+        if main == main_mode and (sub == sub_mode or main != MAIN_AUTO):
+            return mode
+    if main_mode == MAIN_AUTO and sub_mode in (0, SUB_AUTO_READY):
+        return FlightMode.AUTO_LOITER
+    raise UnsupportedMode(f"PX4 mode main={main_mode} sub={sub_mode} is not supported by this vehicle")
+
+
+def decode_custom_mode(custom_mode: int) -> tuple[int, int]:
+    return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF

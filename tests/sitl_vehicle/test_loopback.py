@@ -1,0 +1,228 @@
+"""Loopback acceptance tests: the vehicle in-process on ephemeral ports, a pymavlink client over UDP."""
+
+from __future__ import annotations
+
+import math
+import random
+import time
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from support.mavclient import px4_mode_name, wait_until
+
+ALT = 1.5
+SQUARE = [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)]
+
+
+def take_off(client, altitude: float = ALT):
+    ack = client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
+    ack = client.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, 488.0 + altitude)
+    assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
+    msg = client.recv("LOCAL_POSITION_NED", 20, lambda m: abs(m.z + altitude) < 0.05 and abs(m.vz) < 0.05)
+    assert msg is not None, "takeoff did not reach its altitude"
+
+
+def enter_offboard(client, hold=(0.0, 0.0, -ALT)):
+    client.stream(hold)
+    time.sleep(0.4)  # PX4 wants the stream running before the switch
+    ack = client.set_mode("OFFBOARD")
+    assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
+
+
+def fly_leg(client, start, corner, settle_s: float = 2.5):
+    """Stream ``corner`` until the vehicle has settled there; return the LOCAL_POSITION_NED samples."""
+    client.stream(corner)
+    samples = []
+    t_start = None
+    while True:
+        msg = client.recv("LOCAL_POSITION_NED", 2.0)
+        assert msg is not None, "telemetry stopped"
+        t = msg.time_boot_ms / 1000.0
+        t_start = t if t_start is None else t_start
+        samples.append((t, (msg.x, msg.y, msg.z), (msg.vx, msg.vy, msg.vz)))
+        settled = math.dist(samples[-1][1], corner) < 0.02 and math.hypot(msg.vx, msg.vy, msg.vz) < 0.02
+        if (settled and t - t_start > settle_s) or t - t_start > 12.0:
+            return samples
+
+
+def leg_metrics(samples, start, corner):
+    direction = [c - s for c, s in zip(corner, start, strict=True)]
+    length = math.hypot(*direction)
+    unit = [d / length for d in direction]
+    peak = max(math.hypot(v[0], v[1], v[2]) for _, _, v in samples)
+    overshoot = max(sum((p[i] - corner[i]) * unit[i] for i in range(3)) for _, p, _ in samples)
+    final_error = math.dist(samples[-1][1], corner)
+    return peak, overshoot, final_error
+
+
+def test_offboard_square_flight_tracks_within_bounds(make_vehicle):
+    server, client = make_vehicle()
+    take_off(client)
+    enter_offboard(client)
+    v_max = server.config.vehicle.planner.v_max_xy
+    start = (0.0, 0.0, -ALT)
+    for x, y in SQUARE:
+        corner = (x, y, -ALT)
+        peak, overshoot, final_error = leg_metrics(fly_leg(client, start, corner), start, corner)
+        assert final_error < 0.05, f"leg to {corner}: final error {final_error:.3f} m"
+        assert abs(peak - v_max) <= 0.05 * v_max, f"leg to {corner}: peak {peak:.3f} m/s vs v_max {v_max}"
+        assert overshoot <= 0.10, f"leg to {corner}: overshoot {overshoot:.3f} m"
+        start = corner
+    ack = client.command(mavlink.MAV_CMD_NAV_LAND)
+    assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+    client.stop_stream()
+    disarmed = client.recv("HEARTBEAT", 30, lambda m: not m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+    assert disarmed is not None, "vehicle did not auto-disarm after landing"
+    assert server.sim.truth.position[2] > -0.05 and not server.sim.crashed
+
+
+def test_offboard_refused_without_setpoint_stream(make_vehicle):
+    _, client = make_vehicle()
+    ack = client.set_mode("OFFBOARD")
+    assert ack.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+    text = client.statustext("Offboard", 3)
+    assert text is not None and "not possible: no setpoint stream" in text
+    hb = client.recv("HEARTBEAT", 3)
+    assert px4_mode_name(hb) != "OFFBOARD"
+
+
+def test_arming_refused_with_reason_in_land_mode(make_vehicle):
+    _, client = make_vehicle()
+    assert client.set_mode("LAND").result == mavlink.MAV_RESULT_ACCEPTED
+    ack = client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert ack.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+    text = client.statustext("Arming denied", 3)
+    assert text is not None and "Land mode is not armable" in text
+
+
+def _offboard_hover(make_vehicle, **params):
+    server, client = make_vehicle(params=tuple(params.items()))
+    take_off(client)
+    enter_offboard(client)
+    client.stream((0.5, 0.0, -ALT))
+    assert client.recv("LOCAL_POSITION_NED", 10, lambda m: abs(m.x - 0.5) < 0.05) is not None
+    return server, client
+
+
+def test_offboard_loss_fails_safe_to_hold(make_vehicle):
+    server, client = _offboard_hover(make_vehicle)
+    client.stop_stream()
+    text = client.statustext("Failsafe", 5)
+    assert text is not None and "Hold" in text
+    hb = client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "LOITER")
+    assert hb is not None and hb.system_status == mavlink.MAV_STATE_CRITICAL
+    # Hold keeps the vehicle in the air where it was.
+    time.sleep(1.0)
+    assert abs(server.sim.truth.position[2] + ALT) < 0.1 and abs(server.sim.truth.position[0] - 0.5) < 0.15
+
+
+def test_offboard_loss_lands_when_configured(make_vehicle):
+    server, client = _offboard_hover(make_vehicle, COM_OBL_RC_ACT=4.0)
+    client.stop_stream()
+    assert client.recv("HEARTBEAT", 5, lambda m: px4_mode_name(m) == "LAND") is not None
+    assert wait_until(lambda: not server.sim.armed, 30), "vehicle did not land and disarm"
+    assert not server.sim.crashed
+
+
+def test_nan_and_unsupported_frame_setpoints_are_rejected_with_statustext(make_vehicle):
+    server, client = make_vehicle()
+    mask = 0b1001_1111_1000
+    with client.lock:
+        client.conn.mav.set_position_target_local_ned_send(0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, mask,
+                                                           math.nan, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0)
+    text = client.statustext("rejected", 3)
+    assert text is not None and "position x is nan" in text and "type_mask" in text
+    time.sleep(1.1 / 4)  # the vehicle rate-limits this warning to one a second of simulation
+    with client.lock:
+        client.conn.mav.set_position_target_local_ned_send(0, 1, 1, mavlink.MAV_FRAME_LOCAL_ENU, mask,
+                                                           0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0)
+    text = client.statustext("frame", 3)
+    assert text is not None and "MAV_FRAME_LOCAL_NED" in text
+    assert server.interface.setpoints_rejected == 2 and server.interface.setpoints_received == 0
+    # Rejected setpoints do not count as a stream: offboard stays unavailable.
+    assert client.set_mode("OFFBOARD").result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+
+
+def test_garbage_and_truncated_packets_never_stop_the_vehicle(make_vehicle):
+    server, client = make_vehicle()
+    rng = random.Random(7)
+    sock = client.conn.port
+    target = server.address("api")
+    valid = mavlink.MAVLink_command_long_message(1, 1, mavlink.MAV_CMD_REQUEST_MESSAGE, 0, 148, 0, 0, 0, 0, 0, 0)
+    packet = valid.pack(mavlink.MAVLink(None, 255, 190))
+    for i in range(300):
+        if i % 3 == 0:
+            data = bytes(rng.randrange(256) for _ in range(rng.randrange(1, 300)))
+        elif i % 3 == 1:
+            data = packet[: rng.randrange(1, len(packet))]  # truncated
+        else:
+            data = bytes([0xFD]) + bytes(rng.randrange(256) for _ in range(rng.randrange(0, 40)))
+        sock.sendto(data, target)
+    # Still alive and still answering commands.
+    ack = client.command(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
+    assert client.recv("AUTOPILOT_VERSION", 3) is not None
+    assert server.links[1].malformed_datagrams >= 150
+
+
+def test_parameters_list_set_and_takeoff_altitude(make_vehicle):
+    server, client = make_vehicle()
+    with client.lock:
+        client.conn.mav.param_request_list_send(1, 1)
+    names = set()
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and len(names) < len(server.params):
+        msg = client.recv("PARAM_VALUE", 1)
+        if msg:
+            names.add(msg.param_id)
+            assert msg.param_type == mavlink.MAV_PARAM_TYPE_REAL32 and msg.param_count == len(server.params)
+    assert names == set(server.params.names())
+    with client.lock:
+        client.conn.mav.param_set_send(1, 1, b"MIS_TAKEOFF_ALT", 1.2, mavlink.MAV_PARAM_TYPE_REAL32)
+    echo = client.recv("PARAM_VALUE", 3, lambda m: m.param_id == "MIS_TAKEOFF_ALT")
+    assert echo is not None and abs(echo.param_value - 1.2) < 1e-6
+    with client.lock:  # out of range: refused, the stored value echoed back
+        client.conn.mav.param_set_send(1, 1, b"MIS_TAKEOFF_ALT", -5.0, mavlink.MAV_PARAM_TYPE_REAL32)
+    echo = client.recv("PARAM_VALUE", 3, lambda m: m.param_id == "MIS_TAKEOFF_ALT")
+    assert abs(echo.param_value - 1.2) < 1e-6
+    # Controller and planner parameters reach the vehicle core at once (PX4 names, PX4 units).
+    with client.lock:
+        client.conn.mav.param_set_send(1, 1, b"MPC_XY_CRUISE", 1.25, mavlink.MAV_PARAM_TYPE_REAL32)
+        client.conn.mav.param_set_send(1, 1, b"MPC_TILTMAX_AIR", 30.0, mavlink.MAV_PARAM_TYPE_REAL32)
+    assert client.recv("PARAM_VALUE", 3, lambda m: m.param_id == "MPC_TILTMAX_AIR") is not None
+    assert server.sim.config.planner.v_max_xy == 1.25
+    assert math.degrees(server.sim.config.control.tilt_max_rad) == pytest.approx(30.0)
+    assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink.MAV_RESULT_ACCEPTED
+    ack = client.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
+    assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+    assert client.recv("HEARTBEAT", 20, lambda m: px4_mode_name(m) == "LOITER") is not None
+    assert abs(server.sim.truth.position[2] + 1.2) < 0.1
+
+
+def test_protocol_services_answer_like_px4(make_vehicle):
+    _, client = make_vehicle()
+    hb = client.recv("HEARTBEAT", 3)
+    assert hb.autopilot == mavlink.MAV_AUTOPILOT_PX4 and hb.type == mavlink.MAV_TYPE_QUADROTOR
+    assert hb.base_mode & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED and px4_mode_name(hb) == "LOITER"
+    sys_status = client.recv("SYS_STATUS", 3)
+    assert sys_status.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    assert client.command(4242).result == mavlink.MAV_RESULT_UNSUPPORTED
+    with client.lock:
+        client.conn.mav.mission_request_list_send(1, 1)
+    assert client.recv("MISSION_COUNT", 3).count == 0
+    with client.lock:
+        client.conn.mav.ping_send(123456, 7, 0, 0)
+    pong = client.recv("PING", 3)
+    assert pong.seq == 7 and pong.target_system == 255
+    with client.lock:
+        client.conn.mav.timesync_send(0, 987654321)
+    ts = client.recv("TIMESYNC", 3, lambda m: m.ts1 == 987654321)
+    assert ts is not None and ts.tc1 > 0
+    ack = client.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE, -1)
+    assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+    client.conn.recv_match(type="ATTITUDE", blocking=True, timeout=0.5)  # drain one in flight
+    assert client.recv("ATTITUDE", 1.0) is None, "ATTITUDE still streams after interval -1"
+    ack = client.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE, 0)
+    assert client.recv("ATTITUDE", 2.0) is not None

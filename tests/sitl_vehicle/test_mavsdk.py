@@ -1,0 +1,80 @@
+"""A real client: the `mavsdk` package's native (4.x) API flies the vehicle as it would fly PX4 SITL."""
+
+from __future__ import annotations
+
+import dataclasses
+import socket
+import time
+
+import pytest
+
+mavsdk = pytest.importorskip("mavsdk")
+from mavsdk.plugins.action import Action  # noqa: E402
+from mavsdk.plugins.offboard import Offboard, PositionNedYaw  # noqa: E402
+from mavsdk.plugins.telemetry import FlightMode, Telemetry  # noqa: E402
+
+from sitl_vehicle.server import ServerConfig, VehicleServer  # noqa: E402
+from sitl_vehicle.sim import VehicleConfig  # noqa: E402
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for(predicate, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_mavsdk_connect_health_arm_takeoff_offboard_land():
+    port = free_udp_port()
+    config = ServerConfig(vehicle=dataclasses.replace(VehicleConfig(), noise=None),
+                          gcs_local=("127.0.0.1", 0), gcs_remote=None, api_local=("127.0.0.1", 0),
+                          api_remote=("127.0.0.1", port), truth_remote=None, speed=3.0)
+    server = VehicleServer(config).start()
+    sdk = mavsdk.Mavsdk(mavsdk.Configuration.create_with_component_type(mavsdk.ComponentType.GROUND_STATION))
+    try:
+        assert sdk.add_any_connection(f"udpin://127.0.0.1:{port}") == mavsdk.ConnectionResult.SUCCESS
+        system = sdk.first_autopilot(10.0)
+        assert system is not None, "MAVSDK did not discover the vehicle as an autopilot"
+        assert system.autopilot_type() == mavsdk.Autopilot.PX4
+        telemetry, action, offboard = Telemetry(system), Action(system), Offboard(system)
+
+        wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+        health = telemetry.health()
+        assert health.is_home_position_ok and health.is_local_position_ok and health.is_armable
+
+        action.set_takeoff_altitude(1.5)
+        assert abs(action.get_takeoff_altitude() - 1.5) < 1e-3
+        action.arm()
+        wait_for(telemetry.armed, 5, "armed telemetry")
+        action.takeoff()
+        wait_for(lambda: abs(telemetry.position_velocity_ned().position.down_m + 1.5) < 0.1, 20, "takeoff altitude")
+
+        offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -1.5, 0.0))
+        offboard.start()
+        wait_for(lambda: telemetry.flight_mode() == FlightMode.OFFBOARD, 5, "offboard mode")
+        offboard.set_position_ned(PositionNedYaw(1.0, -0.5, -1.5, 0.0))
+        wait_for(lambda: _near(telemetry.position_velocity_ned().position, (1.0, -0.5, -1.5), 0.05), 20,
+                 "offboard position")
+        assert _near(server.sim.truth.position, (1.0, -0.5, -1.5), 0.06)
+
+        offboard.stop()  # MAVSDK switches to Hold
+        action.land()
+        wait_for(lambda: not telemetry.armed(), 40, "landing and auto-disarm")
+        assert server.sim.truth.position[2] > -0.05 and not server.sim.crashed
+    finally:
+        sdk.destroy()
+        server.stop()
+
+
+def _near(position, target, tol) -> bool:
+    if hasattr(position, "north_m"):
+        position = (position.north_m, position.east_m, position.down_m)
+    return all(abs(a - b) < tol for a, b in zip(position, target, strict=True))

@@ -1,0 +1,117 @@
+"""Loopback test support: a pymavlink offboard client and small waiting helpers."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+
+class MavClient:
+    """A minimal offboard client over pymavlink, as a companion computer would write one."""
+
+    def __init__(self):
+        self.conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=255, source_component=190,
+                                               dialect="common")
+        self.port = self.conn.port.getsockname()[1]
+        self._stream_stop = threading.Event()
+        self._stream_thread: threading.Thread | None = None
+        self.setpoint: tuple | None = None
+        self.sent_setpoints = 0
+        self.lock = threading.Lock()
+
+    def wait_heartbeat(self, timeout: float = 10.0):
+        hb = self.conn.wait_heartbeat(timeout=timeout)
+        assert hb is not None, "no HEARTBEAT from the vehicle"
+        self.conn.target_system, self.conn.target_component = 1, 1
+        return hb
+
+    def recv(self, kind: str | list[str], timeout: float = 5.0, condition=None):
+        kinds = {kind} if isinstance(kind, str) else set(kind)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            # Never block while holding the lock: the setpoint thread must be able to send at any time.
+            with self.lock:
+                msg = self.conn.recv_match(blocking=False)
+            if msg is None:
+                time.sleep(0.002)
+            elif msg.get_type() in kinds and (condition is None or condition(msg)):
+                return msg
+        return None
+
+    def statustext(self, fragment: str, timeout: float = 5.0) -> str | None:
+        """The first STATUSTEXT containing ``fragment``, reassembled from MAVLink 2 chunks (id, chunk_seq)."""
+        deadline = time.monotonic() + timeout
+        partial: dict[int, list[str]] = {}
+        while time.monotonic() < deadline:
+            msg = self.recv("STATUSTEXT", max(0.0, deadline - time.monotonic()))
+            if msg is None:
+                return None
+            if msg.id == 0:
+                text = msg.text
+            else:
+                partial.setdefault(msg.id, []).append(msg.text)
+                if len(msg.text) == 50:
+                    continue
+                text = "".join(partial.pop(msg.id))
+            if fragment in text:
+                return text
+        return None
+
+    def command(self, command: int, *params: float, timeout: float = 5.0):
+        p = list(params) + [0.0] * (7 - len(params))
+        with self.lock:
+            self.conn.mav.command_long_send(1, 1, command, 0, *p)
+        return self.recv("COMMAND_ACK", timeout, lambda m: m.command == command)
+
+    def set_mode(self, name: str):
+        base, main, sub = mavutil.px4_map[name]
+        return self.command(mavlink.MAV_CMD_DO_SET_MODE, base, main, sub)
+
+    def send_position(self, x: float, y: float, z: float, yaw: float = 0.0, frame=mavlink.MAV_FRAME_LOCAL_NED):
+        mask = 0b1001_1111_1000  # position + yaw
+        with self.lock:
+            self.conn.mav.set_position_target_local_ned_send(0, 1, 1, frame, mask, x, y, z, 0, 0, 0, 0, 0, 0, yaw, 0)
+        self.sent_setpoints += 1
+
+    def stream(self, setpoint: tuple | None, hz: float = 20.0):
+        """Keep re-sending ``setpoint`` (x, y, z) at ``hz`` from a thread, as MAVSDK's offboard does."""
+        self.setpoint = setpoint
+        if self._stream_thread is None:
+            def loop():
+                while not self._stream_stop.wait(1.0 / hz):
+                    if self.setpoint is not None:
+                        self.send_position(*self.setpoint)
+            self._stream_thread = threading.Thread(target=loop, daemon=True)
+            self._stream_thread.start()
+
+    def stop_stream(self):
+        self._stream_stop.set()
+        if self._stream_thread:
+            self._stream_thread.join()
+        self._stream_thread = None
+        self._stream_stop.clear()
+
+    def close(self):
+        self.stop_stream()
+        self.conn.close()
+
+
+def px4_mode_name(hb) -> str:
+    return mavutil.interpret_px4_mode(hb.base_mode, hb.custom_mode)
+
+
+def wait_until(predicate, timeout: float, period: float = 0.02) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(period)
+    return False
+
+
+def distance(a, b) -> float:
+    return math.dist(a, b)
