@@ -179,6 +179,11 @@ class VehicleSim:
         return VehicleState(e.position, e.velocity, e.q, e.omega)
 
     @property
+    def estimate_valid(self) -> bool:
+        """Whether :attr:`estimate` may be used for control/telemetry (always, once constructed)."""
+        return True
+
+    @property
     def landed(self) -> bool:
         """On the ground and not climbing (truth ground contact, PX4 land-detector semantics)."""
         return self.dyn.on_ground

@@ -46,7 +46,7 @@ def fly_square(noise_seed=None):
         cross = np.linalg.norm(rel - np.outer(along, u), axis=1)
         legs.append({
             "final_error": float(np.linalg.norm(rec[-1, :3] - target)),
-            "peak_speed": float(np.max(np.linalg.norm(rec[:, 3:5], axis=1))),
+            "peak_speed": float(np.max(np.linalg.norm(rec[:, 3:6], axis=1))),
             "overshoot": float(max(np.max(along), 0.0)),
             "max_cross_track": float(np.max(cross)),
             "alt_error": float(np.max(np.abs(rec[:, 2] - ALT))),
