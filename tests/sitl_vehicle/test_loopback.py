@@ -9,7 +9,7 @@ import time
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from support.mavclient import px4_mode_name, wait_until
+from support.mavclient import MavClient, px4_mode_name, wait_until
 
 ALT = 1.5
 SQUARE = [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)]
@@ -226,3 +226,41 @@ def test_protocol_services_answer_like_px4(make_vehicle):
     assert client.recv("ATTITUDE", 1.0) is None, "ATTITUDE still streams after interval -1"
     ack = client.command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE, 0)
     assert client.recv("ATTITUDE", 2.0) is not None
+
+
+def test_ground_truth_stream_carries_the_true_pose_at_50_hz_or_more(make_vehicle):
+    truth = MavClient()
+    server, client = make_vehicle(truth_remote=("127.0.0.1", truth.port))
+    take_off(client, 1.0)
+    hovering_since_us = server.sim.time_s * 1e6  # the socket still holds samples from the climb: skip them
+    samples = []
+    deadline = time.monotonic() + 5
+    while len(samples) < 60 and time.monotonic() < deadline:
+        msg = truth.recv("ODOMETRY", 1, lambda m: m.time_usec >= hovering_since_us)
+        if msg is not None:
+            samples.append(msg)
+    truth.close()
+    assert len(samples) >= 60
+    assert all(m.frame_id == mavlink.MAV_FRAME_LOCAL_NED and m.estimator_type == mavlink.MAV_ESTIMATOR_TYPE_MOCAP
+               for m in samples)
+    span_s = (samples[-1].time_usec - samples[0].time_usec) * 1e-6
+    assert (len(samples) - 1) / span_s >= 50.0  # in simulation time
+    last = samples[-1]
+    assert abs(last.z + 1.0) < 0.05 and abs(math.hypot(*last.q) - 1.0) < 1e-6
+
+
+def test_telemetry_reports_the_noisy_estimate_not_the_truth(make_vehicle):
+    import dataclasses
+
+    from sitl_vehicle.sim import VehicleConfig
+
+    server, client = make_vehicle(vehicle=VehicleConfig(), seed=3)  # default config: sensor noise on
+    take_off(client, 1.0)
+    errors = []
+    for _ in range(20):
+        msg = client.recv("LOCAL_POSITION_NED", 2)
+        truth = server.sim.truth.position
+        errors.append(math.dist((msg.x, msg.y, msg.z), truth))
+    assert max(errors) < 0.15, "estimate far from truth"
+    assert max(errors) > 1e-4, "telemetry equals the truth although noise is on"
+    assert dataclasses.replace(server.config.vehicle).noise is not None
