@@ -186,3 +186,55 @@ def test_land_style_setpoint_descends_at_commanded_speed():
     rec = _stream(sim, Setpoint(position=(1.0, 0.0, NAN), velocity=(NAN, NAN, 0.5)), 2.0)
     assert abs(rec[-1, 5] - 0.5) < 0.05  # vz
     assert np.max(np.abs(rec[:, 0] - 1.0)) < 0.02  # x held by position control
+
+
+def _hovering_sim():
+    sim = VehicleSim(VehicleConfig(noise=None))
+    sim.set_armed(True)
+    _stream(sim, Setpoint(position=(0.0, 0.0, -2.0)), 4.0)
+    return sim
+
+
+@pytest.mark.parametrize("name,sp,check", [
+    # velocity xy + position z: moves at the commanded velocity, holds altitude
+    ("vel_xy_pos_z", Setpoint(position=(NAN, NAN, -2.0), velocity=(1.0, -0.5, NAN)),
+     lambda r: abs(r[-1, 3] - 1.0) < 0.03 and abs(r[-1, 4] + 0.5) < 0.03 and np.max(np.abs(r[:, 2] + 2.0)) < 0.05),
+    # position xy + velocity z: climbs at the commanded rate, holds x, y
+    ("pos_xy_vel_z", Setpoint(position=(0.0, 0.0, NAN), velocity=(NAN, NAN, -0.5)),
+     lambda r: abs(r[-1, 5] + 0.5) < 0.03 and np.max(np.abs(r[:, :2])) < 0.02),
+    # velocity only (all three axes)
+    ("vel_only", Setpoint(velocity=(0.0, 0.8, 0.3)),
+     lambda r: abs(r[-1, 4] - 0.8) < 0.03 and abs(r[-1, 5] - 0.3) < 0.03 and abs(r[-1, 3]) < 0.03),
+    # velocity xy + acceleration z = 0 (thrust for level flight, altitude not controlled): stays close
+    ("vel_xy_acc_z", Setpoint(velocity=(0.5, 0.0, NAN), acceleration=(NAN, NAN, 0.0)),
+     lambda r: abs(r[-1, 3] - 0.5) < 0.05 and abs(r[-1, 5]) < 0.3),
+])
+def test_sim_nan_axes_mean_not_controlled(name, sp, check):
+    sim = _hovering_sim()
+    rec = _stream(sim, sp, 2.5)
+    assert check(rec), (name, rec[-1])
+    p_ref, v_ref, _ = sim.reference
+    for i in range(3):
+        assert math.isnan(p_ref[i]) == math.isnan(sp.position[i])  # position reference only where set
+        if not math.isnan(sp.velocity[i]):
+            assert v_ref[i] == pytest.approx(sp.velocity[i])
+
+
+def test_incomplete_setpoint_is_rejected_by_validity_check():
+    sim = _hovering_sim()
+    sim.set_setpoint(Setpoint(position=(1.0, NAN, -2.0)))  # x without y: invalid (PX4 semantics)
+    sim.run(0.5)
+    assert sim.last_position_output is not None and not sim.last_position_output.valid
+    assert not sim.crashed
+
+
+def test_yaw_setpoint_and_yaw_rate():
+    sim = _hovering_sim()
+    _stream(sim, Setpoint(position=(0.0, 0.0, -2.0), yaw=1.0), 3.0)
+    assert sim.truth.euler()[2] == pytest.approx(1.0, abs=0.01)
+    _stream(sim, Setpoint(position=(0.0, 0.0, -2.0), yaw_rate=0.5), 2.0)
+    assert abs(sim.truth.angular_velocity[2] - 0.5) < 0.05
+    _stream(sim, Setpoint(position=(0.0, 0.0, -2.0)), 1.0)  # neither: heading held
+    y0 = sim.truth.euler()[2]
+    _stream(sim, Setpoint(position=(0.0, 0.0, -2.0)), 1.0)
+    assert abs(sim.truth.euler()[2] - y0) < 0.02
