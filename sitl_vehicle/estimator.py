@@ -36,24 +36,16 @@ class Estimator:
                  attitude=(1.0, 0.0, 0.0, 0.0), att_gain: float = 0.05, gyro_bias_gain: float = 0.5,
                  accel_bias_walk: float = 0.01):
         self.noise = noise
-        self.dt = 1.0 / rate_hz
         self._physics_dt = physics_dt
+        self._accel_bias_walk = accel_bias_walk
         self.att_gain = att_gain
         self.gyro_bias_gain = gyro_bias_gain
-        dt = self.dt
         kf = KalmanFilter(dim_x=9, dim_z=3, dim_u=3)
         i3 = np.eye(3)
-        z3 = np.zeros((3, 3))
-        kf.F = np.block([[i3, dt * i3, -0.5 * dt * dt * i3], [z3, i3, -dt * i3], [z3, z3, i3]])
-        kf.B = np.vstack([0.5 * dt * dt * i3, dt * i3, z3])
-        kf.H = np.hstack([i3, z3, z3])
+        kf.H = np.hstack([i3, np.zeros((3, 3)), np.zeros((3, 3))])
         kf.R = noise.pos_noise_m ** 2 * i3 if noise.pos_noise_m > 0 else 1e-8 * i3
-        samples = max(int(round(dt / physics_dt)), 1)
-        sa = max(noise.accel_noise_m_s2 / math.sqrt(samples), 1e-3) * 2.0  # x2: unmodelled attitude error
-        g = np.vstack([0.5 * dt * dt * i3, dt * i3, z3])
-        q = sa ** 2 * (g @ g.T)
-        q[6:, 6:] = (accel_bias_walk ** 2) * dt * i3
-        kf.Q = q
+        self.kf = kf
+        self.set_rate(rate_hz)
         kf.x = np.array([*position, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], dtype=float)
         kf.P = np.diag([0.05 ** 2] * 3 + [0.1 ** 2] * 3 + [max(noise.accel_bias_m_s2, 1e-3) ** 2] * 3)
         self.kf = kf
@@ -66,6 +58,22 @@ class Estimator:
         self.position = tuple(float(c) for c in position)
         self.velocity = (0.0, 0.0, 0.0)
         self.acceleration = (0.0, 0.0, 0.0)
+
+    def set_rate(self, rate_hz: float) -> None:
+        """(Re)build the constant F, B, Q for a prediction interval of ``1/rate_hz``; state and P are kept."""
+        self.dt = dt = 1.0 / rate_hz
+        noise = self.noise
+        kf = self.kf
+        i3 = np.eye(3)
+        z3 = np.zeros((3, 3))
+        kf.F = np.block([[i3, dt * i3, -0.5 * dt * dt * i3], [z3, i3, -dt * i3], [z3, z3, i3]])
+        kf.B = np.vstack([0.5 * dt * dt * i3, dt * i3, z3])
+        samples = max(int(round(dt / self._physics_dt)), 1)
+        sa = max(noise.accel_noise_m_s2 / math.sqrt(samples), 1e-3) * 2.0  # x2: unmodelled attitude error
+        g = np.vstack([0.5 * dt * dt * i3, dt * i3, z3])
+        q = sa ** 2 * (g @ g.T)
+        q[6:, 6:] = (self._accel_bias_walk ** 2) * dt * i3
+        kf.Q = q
 
     # ------------------------------------------------------------------ attitude
     def add_gyro(self, gyro, dt: float) -> None:

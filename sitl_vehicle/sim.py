@@ -42,7 +42,7 @@ from sitl_vehicle.trajectory import PlannerConfig, TrapezoidPlanner, VelocitySle
 
 __all__ = [
     "AIRFRAMES", "Airframe", "ControlConfig", "PlannerConfig", "SensorNoise", "Setpoint", "VehicleConfig",
-    "VehicleSim", "VehicleState", "CollisionWorld", "GroundOnly",
+    "VehicleSim", "VehicleState", "CollisionWorld", "GroundOnly", "GRAVITY",
 ]
 
 NAN = float("nan")
@@ -125,11 +125,12 @@ class VehicleSim:
         if self.noise is not None:
             self.imu = Imu(self.noise, self._rng)
             self.pose_sensor = PoseSensor(self.noise, self._rng)
-            self.estimator = Estimator(self.noise, config.control.position_hz, self.dt,
+            self.estimator = Estimator(self.noise, 1.0 / self._pos_dt, self.dt,
                                        self.dyn.position, self.dyn.attitude)
             self._est_div = self._pos_div
             self._pose_div = max(int(round(config.physics_hz / self.noise.pose_rate_hz)), 1)
             self._v_mark = self.dyn.velocity
+            self._mark_k = 0
         else:
             self.imu = self.pose_sensor = self.estimator = None
 
@@ -139,6 +140,11 @@ class VehicleSim:
         self._pos_div = max(int(round(self.config.physics_hz / c.position_hz)), 1)
         self._att_div = max(int(round(self.config.physics_hz / c.attitude_hz)), 1)
         self._pos_dt = self._pos_div * self.dt
+        est = getattr(self, "estimator", None)
+        if est is not None:
+            # the estimator predicts at the position-loop rate (EKF2-like, IMU averaged over the interval)
+            est.set_rate(1.0 / self._pos_dt)
+            self._est_div = self._pos_div
         pc = self.pos_ctl
         pc.set_position_gains((c.pos_p_xy, c.pos_p_xy, c.pos_p_z))
         pc.set_velocity_gains((c.vel_p_xy, c.vel_p_xy, c.vel_p_z), (c.vel_i_xy, c.vel_i_xy, c.vel_i_z),
@@ -155,8 +161,6 @@ class VehicleSim:
     def reconfigure(self, *, control: ControlConfig | None = None, planner: PlannerConfig | None = None) -> None:
         """Swap gains/limits at runtime without resetting state (integrators, plan, estimate are kept)."""
         if control is not None:
-            if control.position_hz != self.control_config.position_hz and self.estimator is not None:
-                control = _replace_rate(control, self.control_config.position_hz)
             self._apply_control_config(control)
             self.config = _replace(self.config, control=control)
         if planner is not None:
@@ -295,10 +299,12 @@ class VehicleSim:
             if k % self._est_div == 0:
                 v = dyn.velocity
                 vm = self._v_mark
+                n = k - self._mark_k
                 self._v_mark = v
-                if k > 0:
+                self._mark_k = k
+                if n > 0:
                     f = self.imu.accel_mean(dyn.attitude, (v[0] - vm[0], v[1] - vm[1], v[2] - vm[2]),
-                                            self._pos_dt, self._pos_div)
+                                            n * self.dt, n)
                     est.predict(f)
             if k % self._pose_div == 0:
                 p, q = self.pose_sensor.measure(dyn.position, dyn.attitude)
@@ -409,12 +415,3 @@ def _replace(cfg, **kw):
 
     return replace(cfg, **kw)
 
-
-def _replace_rate(control: ControlConfig, position_hz: float) -> ControlConfig:
-    """The estimator's rate is fixed at construction; keep the position loop at it."""
-    from dataclasses import replace
-
-    return replace(control, position_hz=position_hz)
-
-
-__all__ += ["GRAVITY"]

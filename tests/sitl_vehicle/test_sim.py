@@ -238,3 +238,15 @@ def test_yaw_setpoint_and_yaw_rate():
     y0 = sim.truth.euler()[2]
     _stream(sim, Setpoint(position=(0.0, 0.0, -2.0)), 1.0)
     assert abs(sim.truth.euler()[2] - y0) < 0.02
+
+
+def test_reconfigure_position_rate_with_estimator_keeps_flying():
+    from dataclasses import replace
+
+    sim = VehicleSim(VehicleConfig(), rng=np.random.default_rng(2))
+    sim.set_armed(True)
+    _stream(sim, Setpoint(position=(0.0, 0.0, -1.0)), 3.0)
+    sim.reconfigure(control=replace(sim.config.control, position_hz=50.0))
+    assert sim._pos_div == 10 and sim.estimator.dt == pytest.approx(0.02)
+    rec = _stream(sim, Setpoint(position=(1.0, 0.0, -1.0)), 3.0)
+    assert abs(rec[-1, 0] - 1.0) < 0.05 and math.dist(sim.estimate.position, sim.truth.position) < 0.03
