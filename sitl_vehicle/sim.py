@@ -49,8 +49,7 @@ NAN = float("nan")
 NAN3 = (NAN, NAN, NAN)
 
 
-def _fin(x: float) -> bool:
-    return x == x and x not in (math.inf, -math.inf)
+_fin = math.isfinite  # C builtin: much cheaper than a Python-level helper in the control loops
 
 
 @dataclass(frozen=True)

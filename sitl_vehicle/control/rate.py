@@ -66,9 +66,13 @@ class RateControl:
         if update_integral:
             lim = self._lim
             sp, sn = self._sat_pos, self._sat_neg
-            for k, e in ((0, e0), (1, e1), (2, e2)):
-                if (e > 0.0 and sp[k]) or (e < 0.0 and sn[k]):
-                    continue
-                v = it[k] + ki[k] * e * dt
-                it[k] = -lim[k] if v < -lim[k] else (lim[k] if v > lim[k] else v)
+            if not ((e0 > 0.0 and sp[0]) or (e0 < 0.0 and sn[0])):
+                v = it[0] + ki[0] * e0 * dt
+                it[0] = -lim[0] if v < -lim[0] else (lim[0] if v > lim[0] else v)
+            if not ((e1 > 0.0 and sp[1]) or (e1 < 0.0 and sn[1])):
+                v = it[1] + ki[1] * e1 * dt
+                it[1] = -lim[1] if v < -lim[1] else (lim[1] if v > lim[1] else v)
+            if not ((e2 > 0.0 and sp[2]) or (e2 < 0.0 and sn[2])):
+                v = it[2] + ki[2] * e2 * dt
+                it[2] = -lim[2] if v < -lim[2] else (lim[2] if v > lim[2] else v)
         return out
