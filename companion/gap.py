@@ -132,13 +132,17 @@ class ParallaxGapConfig:
     median_ksize: int = 5             # smoothing of the 8-bit log-inverse-depth image
     robust_percentiles: tuple[float, float] = (0.5, 99.5)   # log inverse depth → 8 bit
     min_contrast: float = 1.25        # a split is real when the classes' median inverse depths differ this much
-    min_separability: float = 0.7     # ... and Otsu's between/total variance ratio is at least this
+    min_separability: float = 0.6     # ... and Otsu's between/total variance ratio is at least this
     max_splits: int = 4               # nearest surfaces peeled off (floor, wall, ...) before the farthest class
     open_ksize: int = 5               # opening (remove specks) then closing of the far mask
     close_ksize: int = 7
     area_min_frac: float = 0.001
     area_max_frac: float = 0.9
     border_penalty: float = 0.5       # a component touching the image border counts this much of its area
+    border_min_frac: float = 0.02     # ... and needs at least this fraction of the image (flow is poor there)
+    border_px: int = 6                # flow this close to the image edge is not trusted (inpainted)
+    max_border_frac: float = 0.5      # a gap is a hole in a nearer surface: at most this much of its outline
+                                      # may run along the image border (rejects "the whole wall beyond the floor")
     min_flow_px: float = 0.05         # below this median |flow| there is no parallax to read
 
 
@@ -273,6 +277,9 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
     if not np.isfinite(mag).any() or float(np.nanmedian(mag)) < config.min_flow_px:
         return _no_gap((h, w), "flow too small to measure parallax", det)
     rho, valid = inverse_depth_from_flow(flow, motion, config)
+    if config.border_px > 0:
+        b = config.border_px
+        valid[:b], valid[-b:], valid[:, :b], valid[:, -b:] = False, False, False, False
     if valid.sum() < 0.2 * h * w:
         return _no_gap((h, w), "too few pixels away from the focus of expansion", det)
     positive = valid & (rho > 0)
@@ -295,21 +302,25 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
         cv2.MORPH_ELLIPSE, (config.open_ksize, config.open_ksize)))
     far = cv2.morphologyEx(far, cv2.MORPH_CLOSE, cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (config.close_ksize, config.close_ksize)))
-    contours, _ = cv2.findContours(far, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    contours, _ = cv2.findContours(far, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     a_min, a_max = config.area_min_frac * h * w, config.area_max_frac * h * w
     best, best_score = None, 0.0
     for c in contours:
         area = cv2.contourArea(c)
         if not a_min <= area <= a_max:
             continue
-        x, y, bw, bh = cv2.boundingRect(c)
-        touches = x <= 0 or y <= 0 or x + bw >= w or y + bh >= h
+        pts = c.reshape(-1, 2)
+        on_border = (pts[:, 0] <= 0) | (pts[:, 1] <= 0) | (pts[:, 0] >= w - 1) | (pts[:, 1] >= h - 1)
+        touches = bool(on_border.any())
+        if touches and (area < config.border_min_frac * h * w or on_border.mean() > config.max_border_frac):
+            continue
         score = area * (config.border_penalty if touches else 1.0)
         if score > best_score:
             best, best_score = c, score
     if best is None:
-        return _no_gap((h, w), f"no far region with {a_min:.0f} <= area <= {a_max:.0f} px²", det)
-    return _from_contour((h, w), best, det)
+        return _no_gap((h, w), f"no far region with {a_min:.0f} <= area <= {a_max:.0f} px² enclosed by a "
+                               "nearer surface", det)
+    return _from_contour((h, w), cv2.approxPolyDP(best, 0.5, True), det)
 
 
 DETECTORS = {"paper": detect_gap, "parallax": detect_gap_parallax}

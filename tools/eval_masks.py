@@ -30,7 +30,7 @@ import numpy as np
 
 log = logging.getLogger("flowgap.eval_masks")
 
-DEFAULT_BACKENDS = ("dis:fast", "dis:medium", "farneback", "groundtruth", "raft")
+DEFAULT_BACKENDS = ("dis:fast", "dis:medium", "dis:fine", "farneback", "groundtruth", "raft")
 DEFAULT_DETECTORS = ("paper", "parallax", "parallax_known")
 GOALS = {"dis_median_iou": 0.85, "dis_detection_rate": 0.95, "best_median_iou": 0.90, "best_min_scene_iou": 0.75}
 

@@ -13,7 +13,9 @@ DIS_PRESETS = {
     "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
     "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
     "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
+    "fine": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,      # ours: MEDIUM down to full resolution (finest scale 0)
 }
+_PRESET_OVERRIDES = {"fine": {"finest_scale": 0}}
 
 
 def _grey(img: np.ndarray) -> np.ndarray:
@@ -24,7 +26,10 @@ def _grey(img: np.ndarray) -> np.ndarray:
 class DisBackend:
     """OpenCV DIS optical flow.
 
-    ``preset``: "ultrafast" | "fast" | "medium".  ``warm_start``: use the previous call's flow as the initial
+    ``preset``: "ultrafast" | "fast" | "medium" (OpenCV's) | "fine" (flowgap's: MEDIUM with its finest scale
+    lowered to 0, i.e. patches matched at full resolution; ~4× MEDIUM's time, best gap masks on our suite).
+
+    ``warm_start``: use the previous call's flow as the initial
     flow of the next call (useful on a video-like sequence).  Further DIS parameters may be overridden with
     ``finest_scale``, ``patch_size``, ``patch_stride``, ``gradient_descent_iterations``,
     ``variational_refinement_iterations``.
@@ -42,6 +47,8 @@ class DisBackend:
         self.preset = preset
         self.warm_start = warm_start
         self._dis = cv2.DISOpticalFlow_create(DIS_PRESETS[preset])
+        if finest_scale is None:
+            finest_scale = _PRESET_OVERRIDES.get(preset, {}).get("finest_scale")
         for value, setter in ((finest_scale, "setFinestScale"), (patch_size, "setPatchSize"),
                               (patch_stride, "setPatchStride"),
                               (gradient_descent_iterations, "setGradientDescentIterations"),

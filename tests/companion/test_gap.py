@@ -83,3 +83,20 @@ def test_parallax_detector_accepts_known_motion():
     flow, truth = translation_flow(H, W, (0.0, 0.0, 1.0), QUAD)
     res = detect_gap_parallax(flow, motion=CameraMotion(translation=(0.0, 0.0, 1.0)))
     assert iou(res.mask, truth) >= 0.95
+
+
+def test_parallax_detector_sees_no_gap_on_wall_and_floor():
+    # Forward+lateral motion over a wall (ρ = 0.5) with a floor in its lower quarter whose inverse depth
+    # grows towards the bottom: no region is farther than the wall, so there is no gap.
+    h, w = H, W
+    flow, _ = translation_flow(h, w, (0.2, 0.0, 1.0), [(0, 0), (1, 0), (1, 1)], rho_far=0.5)
+    ys = np.arange(h, dtype=np.float64)
+    ramp = np.where(ys > 0.75 * h, 1.0 + 3.0 * (ys - 0.75 * h) / (0.25 * h), 1.0)
+    flow *= ramp[:, None, None].astype(np.float32)
+    res = detect_gap_parallax(flow)
+    assert not res.found, res.area
+    assert "enclosed" in res.reason
+    # ... and with a far polygon added, it is found despite the floor
+    flow2, truth = translation_flow(h, w, (0.2, 0.0, 1.0), QUAD)
+    flow2 *= ramp[:, None, None].astype(np.float32)
+    assert iou(detect_gap_parallax(flow2).mask, truth) >= 0.95

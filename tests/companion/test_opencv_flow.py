@@ -11,6 +11,7 @@ SHIFT = (2.5, -1.5)
     ("dis", {"preset": "ultrafast"}, 0.4),
     ("dis", {"preset": "fast"}, 0.4),
     ("dis", {"preset": "medium"}, 0.1),
+    ("dis", {"preset": "fine"}, 0.1),
     ("farneback", {}, 0.1),
 ])
 def test_known_shift_epe(name, options, bound):
