@@ -52,9 +52,10 @@ def fly_square(noise_seed=None):
             "alt_error": float(np.max(np.abs(rec[:, 2] - ALT))),
         })
         start = target
+    restarts = sim.planner.restarts  # take-off + 4 corners; the 20 Hz re-sends never replanned
     # land: hold x, y; descend in velocity (z position NaN)
     land = _stream(sim, Setpoint(position=(0.0, 0.0, NAN), velocity=(NAN, NAN, 0.7)), 4.0)
-    return {"sim": sim, "takeoff": takeoff, "legs": legs, "land": land}
+    return {"sim": sim, "takeoff": takeoff, "legs": legs, "land": land, "restarts": restarts}
 
 
 @pytest.fixture(scope="module")
@@ -81,6 +82,10 @@ def test_square_corner_accuracy_noise_off(clean_flight, leg):
     assert m["overshoot"] < 0.10, m
     assert m["max_cross_track"] < 0.10, m
     assert m["alt_error"] < 0.10, m
+
+
+def test_resent_setpoints_never_restart_the_planner(clean_flight):
+    assert clean_flight["restarts"] == 1 + len(CORNERS)
 
 
 def test_lands_softly_and_is_landed(clean_flight):
