@@ -118,3 +118,61 @@ def test_enough_thrust_lifts_off():
     for _ in range(50):
         d.step((0.7,) * 4)
     assert not d.on_ground and d.position[2] < 0.0 and d.velocity[2] < 0.0
+
+
+def _reference_rhs(af):
+    """Slow, independent twin of the dynamics (numpy, motor states inside the ODE) for solve_ivp."""
+    import numpy as np
+
+    geom = af.rotor_geometry()
+    inertia = np.array(af.inertia_kgm2)
+    drag = np.array(af.drag_coeff_ns_per_m)
+
+    def rhs(_t, y, u):
+        v, q, w, m = y[3:6], y[6:10], y[10:13], y[13:17]
+        thrusts = af.thrust_max_n * m
+        torque = np.zeros(3)
+        for (rx, ry, s), t in zip(geom, thrusts, strict=True):
+            torque += np.cross([rx, ry, 0.0], [0.0, 0.0, -t]) + [0.0, 0.0, s * af.torque_coeff_m * t]
+        qw, qx, qy, qz = q
+        rot = np.array([
+            [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)],
+            [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)],
+            [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)],
+        ])
+        acc = np.array([0.0, 0.0, GRAVITY]) + rot @ [0.0, 0.0, -thrusts.sum() / af.mass_kg] - drag * v / af.mass_kg
+        omega_q = np.array([0.0, *w])
+        qdot = 0.5 * np.array([
+            qw * omega_q[0] - qx * omega_q[1] - qy * omega_q[2] - qz * omega_q[3],
+            qw * omega_q[1] + qx * omega_q[0] + qy * omega_q[3] - qz * omega_q[2],
+            qw * omega_q[2] - qx * omega_q[3] + qy * omega_q[0] + qz * omega_q[1],
+            qw * omega_q[3] + qx * omega_q[2] - qy * omega_q[1] + qz * omega_q[0],
+        ])
+        wdot = (torque - np.cross(w, inertia * w)) / inertia
+        mdot = (np.asarray(u) - m) / af.motor_tau_s
+        return np.concatenate([v, acc, qdot, wdot, mdot])
+
+    return rhs
+
+
+@pytest.mark.parametrize("airframe", [QUAD250, TELLO])
+def test_rk4_matches_a_slow_reference_twin(airframe):
+    """Fast float RK4 (exact motor lag, mean rotor force per step) vs scipy on the full 17-state ODE."""
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    d = QuadDynamics(airframe, DT, position=(0.0, 0.0, -50.0), yaw=0.3)
+    d.x[10:13] = [0.4, -0.3, 0.2]
+    h = airframe.hover_thrust
+    d.motor = [h] * 4
+    y = np.array(d.x + d.motor)
+    rhs = _reference_rhs(airframe)
+    commands = [(h + 0.02, h - 0.01, h, h + 0.01), (h - 0.02, h + 0.03, h + 0.01, h - 0.01)]  # 2nd: net yaw
+    for u in commands:  # two 0.25 s segments with different constant commands
+        for _ in range(125):
+            d.step(u)
+        y = solve_ivp(rhs, (0.0, 0.25), y, args=(u,), rtol=1e-10, atol=1e-12).y[:, -1]
+    assert np.allclose(d.x[:6], y[:6], atol=1e-5)
+    assert np.allclose(d.x[6:10], y[6:10] / np.linalg.norm(y[6:10]), atol=1e-5)
+    assert np.allclose(d.x[10:13], y[10:13], atol=1e-4)
+    assert np.allclose(d.motor, y[13:17], atol=1e-12)
