@@ -218,6 +218,53 @@ def test_synthetic_flight_setpoints_and_tracking(flight, flight_path):
     assert 0.01 < truth["estimate_error"]["mean_m"] < 0.08  # truth = estimate + N(0, 0.02) per axis
 
 
+def test_log_written_by_pymavlink_setup_logfile(tmp_path):
+    """A tlog written by pymavlink's own logger (mavfile.setup_logfile) on a TCP loopback link."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    rx = mavutil.mavlink_connection(f"tcpin:127.0.0.1:{port}", source_system=255, dialect="common")
+    tx = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=1, source_component=1,
+                                    dialect="common")
+    path = tmp_path / "loop.tlog"
+    rx.setup_logfile(str(path))
+    sent = 0
+    try:
+        for i in range(300):
+            if i % 50 == 0:
+                tx.mav.heartbeat_send(mav2.MAV_TYPE_QUADROTOR, mav2.MAV_AUTOPILOT_PX4, 129 if i else 1,
+                                      PX4_OFFBOARD if i else PX4_POSCTL, 4)
+                sent += 1
+            tx.mav.set_position_target_local_ned_send(i, 1, 1, 1, POS_ONLY, 0.01 * i, 0, -1.5, *[0] * 8)
+            tx.mav.local_position_ned_send(i, 0.01 * i - 0.02, 0, -1.5, 0, 0, 0)
+            sent += 2
+        got = 0
+        while got < sent and rx.recv_match(blocking=True, timeout=5) is not None:
+            got += 1
+    finally:
+        rx.logfile.close()
+        tx.close()
+        rx.close()
+    assert got == sent
+    m = analyse_tlog(path).metrics
+    assert m["messages"]["total"] == sent and m["offboard"]["setpoints"]["count"] == 300
+    assert [e["mode"] for e in m["modes"]["timeline"]] == ["POSCTL", "OFFBOARD"]
+    assert m["arm_events"][0]["event"] == "arm"
+    te = m["offboard"]["tracking_error"]  # each sample logged right after its own setpoint
+    assert te["n_samples"] == 300 and te["max_m"] == pytest.approx(0.02, abs=1e-5)
+
+
+def test_latest_before_ties_follow_file_order():
+    from tools.tlog.analysis import latest_before
+
+    t_sp, i_sp = np.array([10, 20, 20, 30]), np.array([0, 2, 5, 7])
+    t_pos, i_pos = np.array([5, 20, 20, 25, 40]), np.array([1, 3, 6, 4, 9])
+    assert latest_before(t_pos, t_sp, i_pos, i_sp).tolist() == [-1, 1, 2, 2, 3]
+    assert latest_before(t_pos, t_sp).tolist() == [-1, 2, 2, 2, 3]
+
+
 def test_truth_option_none_and_absent(flight_path, tmp_path):
     assert analyse_tlog(flight_path, truth="none").metrics["offboard"]["truth"]["source"].startswith("disabled")
     no_truth = tmp_path / "nt.tlog"

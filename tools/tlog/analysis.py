@@ -11,7 +11,8 @@ Definitions used in the metrics (all times are tlog receive times, seconds from 
 - *setpoint*: SET_POSITION_TARGET_LOCAL_NED. It is *position-controlled* when none of the x/y/z ignore
   bits (type_mask & 0b111) is set and its frame is MAV_FRAME_LOCAL_NED; only those enter tracking error.
 - *tracking error* of a position sample at time t: the distance to the latest position-controlled setpoint
-  logged at or before t (samples before the first such setpoint are skipped). ``tracking_error`` uses all
+  logged before it (tlog time; within the same microsecond, file order decides; samples before the first
+  such setpoint are skipped). ``tracking_error`` uses all
   such samples; ``tracking_error_offboard`` only those inside offboard-mode intervals.
 - *offboard mode*: PX4 OFFBOARD, ArduPilot GUIDED / GUIDED_NOGPS, from the vehicle's HEARTBEATs; an
   interval lasts from the heartbeat that shows the mode to the next heartbeat that shows another mode
@@ -31,7 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from tools.tlog.framing import Frames, decode_columns, decode_messages, load_dialect, scan_tlog
+from tools.tlog.framing import (
+    Frames,
+    decode_columns,
+    decode_messages,
+    load_dialect,
+    looks_like_raw_mavlink,
+    scan_tlog,
+)
 
 log = logging.getLogger(__name__)
 
@@ -111,15 +119,35 @@ def _stats(err: np.ndarray) -> dict[str, Any]:
             "median_m": float(np.median(err)), "p95_m": float(np.percentile(err, 95)), "max_m": float(err.max())}
 
 
-def tracking_stats(t_pos: np.ndarray, pos: np.ndarray, t_sp: np.ndarray, sp: np.ndarray,
-                   mask: np.ndarray | None = None) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
-    """Error of each position sample against the latest setpoint at or before it.
+def latest_before(t_pos: np.ndarray, t_sp: np.ndarray, i_pos: np.ndarray | None = None,
+                  i_sp: np.ndarray | None = None) -> np.ndarray:
+    """Index into ``t_sp`` of the latest setpoint logged before each sample, -1 if none.
 
-    Returns (stats, sample times used, 3-D error per sample). ``t_*`` in integer µs (ties count as "before").
+    Both series sorted by time. Equal times are ordered by file position (``i_*``, packet indices) when
+    given (a setpoint logged after the sample in the same microsecond does not count), else count as before.
+    """
+    if i_pos is None or i_sp is None:
+        return np.searchsorted(t_sp, t_pos, side="right") - 1
+    t = np.concatenate([t_sp, t_pos])
+    i = np.concatenate([i_sp, i_pos])
+    is_sp = np.concatenate([np.ones(t_sp.size, dtype=bool), np.zeros(t_pos.size, dtype=bool)])
+    order = np.lexsort((i, t))
+    counter = np.cumsum(is_sp[order]) - 1
+    k = np.empty(t_pos.size, dtype=np.int64)
+    k[order[~is_sp[order]] - t_sp.size] = counter[~is_sp[order]]
+    return k
+
+
+def tracking_stats(t_pos: np.ndarray, pos: np.ndarray, t_sp: np.ndarray, sp: np.ndarray,
+                   mask: np.ndarray | None = None, i_pos: np.ndarray | None = None,
+                   i_sp: np.ndarray | None = None) -> tuple[dict[str, Any], np.ndarray, np.ndarray]:
+    """Error of each position sample against the latest setpoint logged before it (see latest_before).
+
+    Returns (stats, sample times used, 3-D error per sample); ``t_*`` in integer µs, sorted.
     """
     if t_pos.size == 0 or t_sp.size == 0:
         return {"n_samples": 0}, np.zeros(0), np.zeros(0)
-    k = np.searchsorted(t_sp, t_pos, side="right") - 1
+    k = latest_before(t_pos, t_sp, i_pos, i_sp)
     use = k >= 0
     if mask is not None:
         use &= mask
@@ -191,8 +219,12 @@ def analyse_tlog(path: str | Path, *, truth: str = "auto", dialect: str = "ardup
     frames = scan_tlog(raw, mav_mod, progress=progress)
     rep.frames = frames
     if len(frames) == 0:
-        rep.note(f"no MAVLink packets found in {len(raw)} bytes: not a tlog "
-                 "(8-byte big-endian µs timestamp before each MAVLink packet)?")
+        if looks_like_raw_mavlink(raw, mav_mod):
+            rep.note(f"no tlog records in {len(raw)} bytes, but it holds raw MAVLink packets without the "
+                     "8-byte timestamps of a tlog (a raw byte capture, not a tlog): record with a tlog writer")
+        else:
+            rep.note(f"no MAVLink packets found in {len(raw)} bytes: not a tlog "
+                     "(8-byte big-endian µs timestamp before each MAVLink packet)?")
         _empty_metrics(rep)
         return rep
     rep.usable = True
@@ -436,6 +468,7 @@ def _offboard(rep: Report, f: Frames, mav: Any, truth_name: str, truth_src: tupl
         pos_ok = np.zeros(0, dtype=bool)
     off["setpoints"] = spm
     t_sp = t_sp_all[pos_ok]
+    i_sp = sidx[pos_ok]
     sp_xyz = np.stack([sp["x"], sp["y"], sp["z"]], axis=1)[pos_ok].astype(np.float64) if n_sp else np.zeros((0, 3))
     rep.series.update(t_sp=(t_sp - t0) / 1e6, sp=sp_xyz)
     # offboard time
@@ -446,11 +479,11 @@ def _offboard(rep: Report, f: Frames, mav: Any, truth_name: str, truth_src: tupl
     off["offboard_intervals_s"] = [[a, b] for a, b in intervals]
     # tracking error against setpoints
     if t_sp.size and t_est.size:
-        stats, t_used, err = tracking_stats(t_est, est, t_sp, sp_xyz)
+        stats, t_used, err = tracking_stats(t_est, est, t_sp, sp_xyz, None, idx, i_sp)
         off["tracking_error"] = stats
         rep.series.update(t_err=(t_used - t0) / 1e6, err=err)
         in_off = _intervals_mask((t_est - t0) / 1e6, intervals)
-        off["tracking_error_offboard"] = tracking_stats(t_est, est, t_sp, sp_xyz, in_off)[0]
+        off["tracking_error_offboard"] = tracking_stats(t_est, est, t_sp, sp_xyz, in_off, idx, i_sp)[0]
     else:
         off["tracking_error"] = None
         off["tracking_error_offboard"] = None
@@ -458,13 +491,13 @@ def _offboard(rep: Report, f: Frames, mav: Any, truth_name: str, truth_src: tupl
             rep.note("no position-controlled SET_POSITION_TARGET_LOCAL_NED (type_mask ignores x/y/z): "
                      "no tracking error")
     # ground truth
-    off["truth"] = _truth(rep, f, mav, truth_name, truth_src, est_src, t_est, est, t_sp, sp_xyz)
+    off["truth"] = _truth(rep, f, mav, truth_name, truth_src, est_src, t_est, est, t_sp, sp_xyz, i_sp)
     rep.metrics["offboard"] = off
 
 
 def _truth(rep: Report, f: Frames, mav: Any, name: str, src: tuple[int, int] | None,
            est_src: tuple[int, int] | None, t_est: np.ndarray, est: np.ndarray,
-           t_sp: np.ndarray, sp_xyz: np.ndarray) -> dict[str, Any]:
+           t_sp: np.ndarray, sp_xyz: np.ndarray, i_sp: np.ndarray) -> dict[str, Any]:
     t0 = rep.series["t0_us"]
     if name == "none":
         return {"source": "disabled (--truth none)"}
@@ -484,7 +517,7 @@ def _truth(rep: Report, f: Frames, mav: Any, name: str, src: tuple[int, int] | N
         tr = ts_.positions(rows)
         rep.series.update(t_truth=(t_tr - t0) / 1e6, truth=tr)
         out: dict[str, Any] = {"source": f"{ts_.message} from {where[0]}:{where[1]}", "samples": int(idx.size)}
-        out["tracking_error"] = tracking_stats(t_tr, tr, t_sp, sp_xyz)[0] if t_sp.size else None
+        out["tracking_error"] = tracking_stats(t_tr, tr, t_sp, sp_xyz, None, idx, i_sp)[0] if t_sp.size else None
         if t_est.size > 1 and t_tr.size:
             # estimate error: truth vs the estimate interpolated at truth times (within the estimate's span)
             inside = (t_tr >= t_est[0]) & (t_tr <= t_est[-1])

@@ -46,10 +46,14 @@ def _crc_table() -> np.ndarray:
 _CRC_TABLE = _crc_table()
 
 
+_CRC_LIST = [int(x) for x in _CRC_TABLE]
+
+
 def crc_x25(buf: bytes | bytearray, crc: int = 0xFFFF) -> int:
     """Scalar CRC-16/MCRF4XX (MAVLink's X.25 checksum), for single packets."""
+    table = _CRC_LIST
     for b in buf:
-        crc = (crc >> 8) ^ int(_CRC_TABLE[(crc ^ b) & 0xFF])
+        crc = (crc >> 8) ^ table[(crc ^ b) & 0xFF]
     return crc
 
 
@@ -162,23 +166,26 @@ def _resync(data: bytes, start: int, n: int, last_ts: int | None, extras: dict[i
             continue
         size, msgid = hd
         ts = _TS.unpack_from(data, p)[0]
-        in_window = last_ts is None or abs(ts - last_ts) <= TS_WINDOW_US
+        in_window = last_ts is not None and abs(ts - last_ts) <= TS_WINDOW_US
         if p + size > n:  # runs past the end: a truncated last record if its time fits
-            if in_window and last_ts is not None:
+            if in_window:
                 return p
             continue
-        crc = _packet_crc_ok(data, p, size, msgid, extras)
-        nxt = _header(data, p + size, n)
-        chain = p + size == n or (
-            nxt is not None and abs(_TS.unpack_from(data, p + size)[0] - ts) <= TS_WINDOW_US)
+        at_end = p + size == n
+        nxt = None if at_end else _header(data, p + size, n)
+        chain = at_end or (nxt is not None and abs(_TS.unpack_from(data, p + size)[0] - ts) <= TS_WINDOW_US)
+        # cheap tests first; the CRC only where it decides
         if last_ts is None:  # no reference time yet (start of file): demand a consistent pair
-            if (chain and crc is not False and p + size < n) or (p + size == n and crc):
+            if at_end:
+                if p == 0 and _packet_crc_ok(data, p, size, msgid, extras):
+                    return p  # the whole file is one record
+            elif chain and _packet_crc_ok(data, p, size, msgid, extras) is not False:
                 return p
-            continue
-        if in_window and (crc or chain):
-            return p
-        if crc and chain and p + size < n:
-            return p
+        elif in_window:
+            if chain or _packet_crc_ok(data, p, size, msgid, extras):
+                return p
+        elif chain and not at_end and _packet_crc_ok(data, p, size, msgid, extras):
+            return p  # a genuine jump in time
 
 
 def _scan_offsets(data: bytes, extras: dict[int, int], progress: bool) -> tuple[list[int], int, int, int]:
@@ -254,13 +261,40 @@ def _scan_offsets(data: bytes, extras: dict[int, int], progress: bool) -> tuple[
             runs += 1 if nxt > pos else 0
             trailing = n - nxt
             break
-        garbage += nxt - pos
-        runs += 1
-        pos = nxt
+        if nxt > pos:
+            garbage += nxt - pos
+            runs += 1
+        # _resync vetted this record (possibly a genuine jump in time): take it, and its time as reference
+        append(nxt)
+        last_ts = _TS.unpack_from(data, nxt)[0]
+        pos = nxt + hd[0]
     if bar is not None:
         bar.update(n - bar.n)
         bar.close()
     return recs, garbage, runs, trailing
+
+
+def looks_like_raw_mavlink(raw: bytes, mavlink_module: Any, need: int = 3) -> bool:
+    """True when ``raw`` holds back-to-back MAVLink packets with good CRCs but no tlog timestamps."""
+    extras = {mid: cls.crc_extra for mid, cls in mavlink_module.mavlink_map.items()}
+    n = len(raw)
+    start = 0
+    for _ in range(64):  # try a few starting points
+        a, b = raw.find(b"\xfd", start), raw.find(b"\xfe", start)
+        c = a if b < 0 else b if a < 0 else min(a, b)
+        if c < 0:
+            return False
+        p, good = c, 0
+        while good < need:
+            hd = _header(raw, p - 8, n)  # _header expects a record offset (8 bytes before STX)
+            if hd is None or p - 8 + hd[0] > n or not _packet_crc_ok(raw, p - 8, hd[0], hd[1], extras):
+                break
+            good += 1
+            p += hd[0] - 8
+        if good >= need:
+            return True
+        start = c + 1
+    return False
 
 
 def _gather(buf: np.ndarray, start: np.ndarray, width: int) -> np.ndarray:
