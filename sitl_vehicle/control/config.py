@@ -26,7 +26,7 @@ class ControlConfig:
     vel_i_xy: float = 0.5  # 1/s^2, MPC_XY_VEL_I_ACC
     vel_d_xy: float = 0.1  # -, MPC_XY_VEL_D_ACC
     vel_p_z: float = 5.0  # 1/s, MPC_Z_VEL_P_ACC
-    vel_i_z: float = 2.0  # 1/s^2, MPC_Z_VEL_I_ACC
+    vel_i_z: float = 4.0  # 1/s^2, MPC_Z_VEL_I_ACC
     vel_d_z: float = 0.0  # -, MPC_Z_VEL_D_ACC
     acc_ff_lead_s: float = 0.06  # s, planner acceleration feed-forward is taken this far ahead (inner-loop lag)
     vel_max_xy: float = 12.0  # m/s, MPC_XY_VEL_MAX (controller limit; the planner has its own)

@@ -1,11 +1,12 @@
 """Flight-quality acceptance of the vehicle core, driven by Setpoint streams (no MAVLink)."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from sitl_vehicle.sim import PlannerConfig, Setpoint, VehicleConfig, VehicleSim
+from sitl_vehicle.sim import AIRFRAMES, PlannerConfig, Setpoint, VehicleConfig, VehicleSim
 
 NAN = float("nan")
 ALT = -1.5
@@ -27,9 +28,11 @@ def _stream(sim, sp, duration_s, rate_hz=20.0):
     return np.array(rec)
 
 
-def fly_square(noise_seed=None):
+def fly_square(noise_seed=None, airframe="quad250"):
     """Arm, take off to 1.5 m, fly the 2 m square corner by corner, land. Returns per-leg metrics."""
-    cfg = VehicleConfig() if noise_seed is not None else VehicleConfig(noise=None)
+    cfg = VehicleConfig(airframe=AIRFRAMES[airframe])
+    if noise_seed is None:
+        cfg = replace(cfg, noise=None)
     sim = VehicleSim(cfg, rng=np.random.default_rng(noise_seed))
     assert sim.landed
     sim.set_armed(True)
@@ -110,6 +113,23 @@ def test_square_corner_accuracy_noise_on(noisy_flight, leg):
 def test_noisy_flight_lands(noisy_flight):
     sim = noisy_flight["sim"]
     assert sim.landed and not sim.crashed
+
+
+def test_tello_flies_the_square_within_the_same_bounds():
+    flight = fly_square(None, airframe="tello")
+    for m in flight["legs"]:
+        assert m["final_error"] < 0.05 and abs(m["peak_speed"] - V_MAX) <= 0.05 * V_MAX and m["overshoot"] < 0.10
+    assert flight["sim"].landed and not flight["sim"].crashed
+
+
+def test_wrong_hover_thrust_is_absorbed_by_the_integrator():
+    cfg = VehicleConfig(noise=None)
+    cfg = replace(cfg, control=replace(cfg.control, hover_thrust=0.8 * cfg.airframe.hover_thrust))
+    sim = VehicleSim(cfg)
+    sim.set_armed(True)
+    _stream(sim, Setpoint(position=(0.0, 0.0, -1.0)), 6.0)
+    assert abs(sim.truth.position[2] + 1.0) < 0.01
+    assert sim.pos_ctl.integral[2] < -0.5  # the integrator supplies the missing 20 % of hover thrust
 
 
 def test_hover_holds_altitude():
