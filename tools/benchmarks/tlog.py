@@ -40,28 +40,30 @@ def make_synthetic_tlog(path: Path, n_target: int = N_TARGET, seed: int = 0) -> 
     t0 = 1_750_000_000_000_000
     out = bytearray()
     count = 0
-    n_steps = int(duration * 50)
+    n_steps = int(duration * 100)  # a 100 Hz base clock
     p = np.zeros(3)
     for i in range(n_steps):
-        t = i * 0.02
+        t = i * 0.01
         us = t0 + int(t * 1e6)
-        p = p + rng.normal(0, 0.01, 3)
-        x, y, z = (float(c) for c in p)
         msgs = []
-        if i % 50 == 0:
+        if i % 100 == 0:
             mode = (6 << 16) if 0.2 * duration < t < 0.9 * duration else (3 << 16)
             msgs += [(veh, m.MAVLink_heartbeat_message(2, 12, 129, mode, 4, 3)),
                      (comp, m.MAVLink_heartbeat_message(18, 8, 0, 0, 4, 3)),
                      (veh, m.MAVLink_sys_status_message(0, 0, 0, 500, 12000, 100, 80, 0, 0, 0, 0, 0, 0))]
-        if i % 500 == 0:
+        if i % 1000 == 0:
             msgs.append((veh, m.MAVLink_statustext_message(6, b"benchmark status %d" % i)))
-        msgs += [(veh, m.MAVLink_attitude_message(int(t * 1000), 0.01, 0.02, 0.3, 0, 0, 0)),
-                 (veh, m.MAVLink_attitude_quaternion_message(int(t * 1000), 1, 0, 0, 0, 0, 0, 0)),
-                 (veh, m.MAVLink_local_position_ned_message(int(t * 1000), x, y, z, 0.1, 0, 0)),
-                 (veh, m.MAVLink_highres_imu_message(int(t * 1e6), 0, 0, -9.8, 0, 0, 0, 0.2, 0, 0.4, 1013,
-                                                     0, 0, 20, 0xFFFF)),
-                 (tru, m.MAVLink_att_pos_mocap_message(int(t * 1e6), [1, 0, 0, 0], x + 0.01, y, z))]
+        if i % 2 == 0:
+            p = p + rng.normal(0, 0.01, 3)
+            x, y, z = (float(c) for c in p)
+            msgs += [(veh, m.MAVLink_attitude_message(int(t * 1000), 0.01, 0.02, 0.3, 0, 0, 0)),
+                     (veh, m.MAVLink_attitude_quaternion_message(int(t * 1000), 1, 0, 0, 0, 0, 0, 0)),
+                     (veh, m.MAVLink_local_position_ned_message(int(t * 1000), x, y, z, 0.1, 0, 0)),
+                     (veh, m.MAVLink_highres_imu_message(int(t * 1e6), 0, 0, -9.8, 0, 0, 0, 0.2, 0, 0.4,
+                                                         1013, 0, 0, 20, 0xFFFF)),
+                     (tru, m.MAVLink_att_pos_mocap_message(int(t * 1e6), [1, 0, 0, 0], x + 0.01, y, z))]
         if i % 5 == 0:
+            x, y, z = (float(c) for c in p)
             msgs += [(comp, m.MAVLink_set_position_target_local_ned_message(
                          int(t * 1000), 1, 1, 1, 0x0FF8, x + 0.1, y, z, 0, 0, 0, 0, 0, 0, 0, 0)),
                      (veh, m.MAVLink_position_target_local_ned_message(

@@ -369,6 +369,9 @@ def _events(rep: Report, f: Frames, mav_mod: Any) -> None:
             if prev_armed is not None and armed != prev_armed:
                 arm_events.append({"t_s": t, "event": "arm" if armed else "disarm"})
             prev_armed = armed
+        vc = comps[f"{vehicle[0]}:{vehicle[1]}"]
+        rep.metrics["packet_loss"]["vehicle_link"] = {"link": f"{vehicle[0]}:{vehicle[1]}", "lost": vc["lost"],
+                                                      "loss_pct": vc["loss_pct"]}
         rep.metrics["initially_armed"] = bool(autopilots[vehicle][0][1].base_mode & MAV_MODE_FLAG_SAFETY_ARMED)
     t_end = rep.metrics["duration_s"]
     for k, e in enumerate(timeline):

@@ -17,8 +17,9 @@ what it reports: duration, systems/components, autopilot and vehicle type, messa
 packet loss per link from sequence gaps, mode timeline (PX4 and ArduPilot custom modes), arm/disarm,
 STATUSTEXT; offboard setpoint rate and longest gap, time in offboard mode, position tracking error of
 LOCAL_POSITION_NED against the latest position-controlled SET_POSITION_TARGET_LOCAL_NED, and against
-ground truth when the log carries it (--truth; auto tries {', '.join(TRUTH_AUTO_ORDER)} from a component
-other than the autopilot's estimate).
+ground truth when the log carries it (--truth; auto tries, in order,
+{', '.join(TRUTH_AUTO_ORDER)}
+from any component other than the one whose LOCAL_POSITION_NED is the estimate).
 
 problems in the log (truncation, garbage, CRC failures, unknown ids, no position data) are reported as
 one-line notes on stderr and in metrics.json, never as a traceback.
@@ -29,7 +30,7 @@ exit status: 0 analysed; 1 no MAVLink packets in the file (empty / not a tlog; o
 examples:
   {PROG} flight.tlog                          # summary on stdout
   {PROG} flight.tlog --out report/ --csv      # + report.md, metrics.json, PNGs, csv/<MSG>.csv
-  {PROG} run/link.tlog --out r/ --scene gap_basic --truth att_pos_mocap
+  {PROG} run/link.tlog --out r/ --scene window1_brick --truth att_pos_mocap
 """
 
 
@@ -44,7 +45,9 @@ def _build_parser() -> argparse.ArgumentParser:
                    help="write report.md, metrics.json and the plots here (default: summary only)")
     p.add_argument("--csv", action="store_true", help="also write DIR/csv/<MESSAGE>.csv per message type")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots (faster)")
-    p.add_argument("--scene", metavar="NAME", help="draw this scene's wall and opening(s) (scenes.load_scene)")
+    p.add_argument("--scene", metavar="NAME",
+                   help="a scenes suite name or spec .json: draw its wall and opening(s), report where the "
+                        "trajectory crosses the wall plane")
     p.add_argument("--truth", default="auto", metavar="SPEC",
                    help="ground-truth source: auto (default), none, a name (att_pos_mocap, "
                         "local_position_ned_cov, odometry, local_position_ned), optionally @SYSID:COMPID")

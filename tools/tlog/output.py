@@ -39,7 +39,11 @@ def summary_text(rep: Report) -> str:
     fr = m["framing"]
     lines.append(f"  {m['duration_s']:.1f} s from {m['start_utc']}, {m['messages']['total']} messages of "
                  f"{m['messages']['types']} types, {len(m['components'])} components; vehicle: {veh}")
-    lines.append(f"  packet loss {m['packet_loss']['loss_pct']:.2f} % ({m['packet_loss']['lost']} lost), "
+    pl = m["packet_loss"]
+    vl = pl.get("vehicle_link")
+    loss = (f"vehicle link {vl['loss_pct']:.2f} % ({vl['lost']} lost), all links {pl['loss_pct']:.2f} %"
+            if vl else f"{pl['loss_pct']:.2f} % ({pl['lost']} lost)")
+    lines.append(f"  packet loss: {loss}, "
                  f"CRC failures {fr['crc_failures']}, unknown ids {fr['unknown_id_packets']}, "
                  f"garbage {fr['garbage_bytes']} B")
     tl = m["modes"]["timeline"]
