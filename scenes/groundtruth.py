@@ -1,0 +1,88 @@
+"""Ground truth from the scene: gap masks, dense optical flow between two poses, collision geometry.
+
+* ``gap_mask``: pixels whose first visible surface (the label where transmittance crosses 0.5) lies
+  beyond the wall, i.e. the opening as seen from the pose (``LABEL_BACKGROUND``).
+* ``flow_between``: forward flow from image 1 to image 2. Each pixel centre of image 1 is back-projected
+  with depth 1, moved into camera 2 and projected; it is valid when it has depth, lands inside image 2
+  in front of the camera, and agrees with image 2's depth at that pixel (within ``depth_tol``, relative),
+  so occluded and disoccluded pixels are invalid.
+* ``load_collision``: the vehicle's collision geometry (see :mod:`scenes.collision`).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from scenes.camera import PinholeCamera, Pose
+from scenes.collision import SceneCollision, load_collision
+from scenes.render import RenderResult, render_splats
+from scenes.splats import LABEL_BACKGROUND, GaussianCloud
+
+__all__ = ["gap_mask", "gap_mask_from_labels", "flow_between", "flow_from_depth", "warp_backward",
+           "load_collision", "SceneCollision"]
+
+
+def gap_mask_from_labels(label: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the label image shows something beyond the wall."""
+    return np.asarray(label) == LABEL_BACKGROUND
+
+
+def gap_mask(cloud: GaussianCloud, camera: PinholeCamera, pose: Pose | tuple, backend: str = "cpu") -> np.ndarray:
+    """(H, W) bool gap mask at ``pose`` (renders the label image)."""
+    return gap_mask_from_labels(render_splats(cloud, camera, pose, backend=backend).label)
+
+
+def _pixel_rays(camera: PinholeCamera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    jj, ii = np.meshgrid(np.arange(camera.width, dtype=np.float64) + 0.5,
+                         np.arange(camera.height, dtype=np.float64) + 0.5)
+    px, py = camera.principal_point
+    return jj, ii, np.stack([(jj - px) / camera.fx, (ii - py) / camera.fy, np.ones_like(jj)], -1)
+
+
+def flow_from_depth(depth1: np.ndarray, depth2: np.ndarray, camera: PinholeCamera, pose1: Pose | tuple,
+                    pose2: Pose | tuple, depth_tol: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+    """(flow (H, W, 2) float32 [du, dv] from image 1 to image 2, valid (H, W) bool) from depths (H, W)."""
+    r1, t1 = camera.world_to_camera(pose1)
+    r2, t2 = camera.world_to_camera(pose2)
+    jj, ii, rays = _pixel_rays(camera)
+    d1 = np.asarray(depth1, np.float64)
+    pc1 = rays * d1[..., None]
+    pw = (pc1 - t1) @ r1            # R1^T (X - t1), row-vector form
+    pc2 = pw @ r2.T + t2
+    z2 = pc2[..., 2]
+    px, py = camera.principal_point
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u2 = camera.fx * pc2[..., 0] / z2 + px
+        v2 = camera.fy * pc2[..., 1] / z2 + py
+    flow = np.stack([u2 - jj, v2 - ii], -1)
+    h, w = d1.shape
+    valid = (d1 > 0) & (z2 > camera.near) & np.isfinite(u2) & np.isfinite(v2)
+    valid &= (u2 >= 0) & (u2 < w) & (v2 >= 0) & (v2 < h)
+    col = np.clip(np.floor(np.where(valid, u2, 0)).astype(np.int64), 0, w - 1)
+    row = np.clip(np.floor(np.where(valid, v2, 0)).astype(np.int64), 0, h - 1)
+    d2 = np.asarray(depth2, np.float64)[row, col]
+    valid &= (d2 > 0) & (np.abs(d2 - z2) <= depth_tol * np.maximum(z2, 1e-6))
+    flow = np.where(valid[..., None], flow, 0.0)
+    return flow.astype(np.float32), valid
+
+
+def flow_between(cloud: GaussianCloud, camera: PinholeCamera, pose1: Pose | tuple, pose2: Pose | tuple,
+                 backend: str = "cpu", depth_tol: float = 0.03,
+                 renders: tuple[RenderResult, RenderResult] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Ground-truth forward flow image 1 -> image 2 and its validity mask (renders both depths unless
+    ``renders`` are given)."""
+    if renders is None:
+        renders = (render_splats(cloud, camera, pose1, backend=backend),
+                   render_splats(cloud, camera, pose2, backend=backend))
+    valid_alpha = renders[0].alpha > 0.99
+    flow, valid = flow_from_depth(renders[0].depth, renders[1].depth, camera, pose1, pose2, depth_tol)
+    return flow, valid & valid_alpha
+
+
+def warp_backward(image2: np.ndarray, flow: np.ndarray) -> np.ndarray:
+    """Sample image 2 at x + flow(x): reproduces image 1 where the flow is valid (bilinear)."""
+    h, w = flow.shape[:2]
+    jj, ii = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    return cv2.remap(image2, jj + flow[..., 0], ii + flow[..., 1], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)

@@ -1,0 +1,259 @@
+"""Gaussian splat clouds and the standard 3DGS ``.ply`` format.
+
+Storage follows the reference 3D Gaussian Splatting trainer: one ``vertex`` element, binary little-endian,
+properties ``x y z nx ny nz f_dc_0..2 f_rest_0..M-1 opacity scale_0..2 rot_0..3`` (float32), where the
+values are *pre-activation*: scales are log-scales (``exp``), opacity is a logit (``sigmoid``), rotations
+are unnormalised quaternions (w, x, y, z) (normalise), colours are SH coefficients with the DC term in
+``f_dc`` and the rest in ``f_rest`` stored channel-major (all R coefficients, then G, then B).
+The SH degree (0-3) is inferred from M in (0, 9, 24, 45).
+
+Per-Gaussian surface labels (ground truth, not part of the 3DGS layout) travel in a sidecar
+``<file>.labels.npy`` so that the ``.ply`` stays loadable by unmodified viewers.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+SH_C0 = 0.28209479177387814
+REST_COUNT_TO_DEGREE = {0: 0, 9: 1, 24: 2, 45: 3}
+
+LABEL_NONE, LABEL_WALL, LABEL_FRAME, LABEL_BACKGROUND, LABEL_FLOOR = 0, 1, 2, 3, 4
+LABEL_NAMES = {LABEL_NONE: "none", LABEL_WALL: "wall", LABEL_FRAME: "frame",
+               LABEL_BACKGROUND: "background (beyond the wall)", LABEL_FLOOR: "floor (in front of the wall)"}
+
+
+class PlyError(ValueError):
+    """A ``.ply`` file is corrupt or unsupported; ``str(exc)`` is one line naming the problem and the fix."""
+
+
+def rgb_to_sh0(rgb: np.ndarray) -> np.ndarray:
+    return (np.asarray(rgb, np.float32) - 0.5) / SH_C0
+
+
+def sh0_to_rgb(sh0: np.ndarray) -> np.ndarray:
+    return np.asarray(sh0, np.float32) * SH_C0 + 0.5
+
+
+@dataclass
+class GaussianCloud:
+    """N Gaussians in world (NED) coordinates; arrays are float32, pre-activation as in 3DGS.
+
+    means (N, 3); log_scales (N, 3); quats (N, 4) wxyz (not necessarily unit); opacity_logits (N,);
+    sh (N, K, 3) with K = (degree + 1)**2; labels (N,) uint8 (``LABEL_*``, ground truth).
+    """
+
+    means: np.ndarray
+    log_scales: np.ndarray
+    quats: np.ndarray
+    opacity_logits: np.ndarray
+    sh: np.ndarray
+    labels: np.ndarray = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        n = len(self.means)
+        self.means = np.ascontiguousarray(self.means, np.float32).reshape(n, 3)
+        self.log_scales = np.ascontiguousarray(self.log_scales, np.float32).reshape(n, 3)
+        self.quats = np.ascontiguousarray(self.quats, np.float32).reshape(n, 4)
+        self.opacity_logits = np.ascontiguousarray(self.opacity_logits, np.float32).reshape(n)
+        self.sh = np.ascontiguousarray(self.sh, np.float32)
+        if self.sh.ndim != 3 or self.sh.shape[0] != n or self.sh.shape[2] != 3 or \
+                self.sh.shape[1] not in (1, 4, 9, 16):
+            raise ValueError(f"sh must be (N, K, 3) with K in 1, 4, 9, 16; got {self.sh.shape}")
+        if self.labels is None:
+            self.labels = np.zeros(n, np.uint8)
+        self.labels = np.ascontiguousarray(self.labels, np.uint8).reshape(n)
+
+    def __len__(self) -> int:
+        return len(self.means)
+
+    @property
+    def sh_degree(self) -> int:
+        return int(round(np.sqrt(self.sh.shape[1]))) - 1
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if len(self) == 0:
+            return np.zeros(3, np.float32), np.zeros(3, np.float32)
+        return self.means.min(0), self.means.max(0)
+
+    def subset(self, index: np.ndarray) -> GaussianCloud:
+        return GaussianCloud(self.means[index], self.log_scales[index], self.quats[index],
+                             self.opacity_logits[index], self.sh[index], self.labels[index])
+
+    @staticmethod
+    def concatenate(clouds: list[GaussianCloud]) -> GaussianCloud:
+        k = max(c.sh.shape[1] for c in clouds)
+        sh = [np.concatenate([c.sh, np.zeros((len(c), k - c.sh.shape[1], 3), np.float32)], 1) for c in clouds]
+        return GaussianCloud(np.concatenate([c.means for c in clouds]),
+                             np.concatenate([c.log_scales for c in clouds]),
+                             np.concatenate([c.quats for c in clouds]),
+                             np.concatenate([c.opacity_logits for c in clouds]), np.concatenate(sh),
+                             np.concatenate([c.labels for c in clouds]))
+
+
+# ------------------------------------------------------------------------------------------------- PLY
+_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+              "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+              "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
+
+
+def _property_names(degree: int) -> list[str]:
+    n_rest = 3 * ((degree + 1) ** 2 - 1)
+    return (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+            + [f"f_rest_{i}" for i in range(n_rest)]
+            + ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"])
+
+
+def write_ply(path: str | Path, cloud: GaussianCloud, *, write_labels: bool = True) -> None:
+    """Write ``cloud`` as a standard 3DGS binary little-endian ``.ply`` (plus ``.labels.npy`` sidecar)."""
+    path = Path(path)
+    n, k = len(cloud), cloud.sh.shape[1]
+    names = _property_names(cloud.sh_degree)
+    data = np.zeros((n, len(names)), np.float32)
+    data[:, 0:3] = cloud.means
+    data[:, 6:9] = cloud.sh[:, 0, :]
+    rest = cloud.sh[:, 1:, :].transpose(0, 2, 1).reshape(n, 3 * (k - 1))  # channel-major
+    data[:, 9:9 + rest.shape[1]] = rest
+    o = 9 + rest.shape[1]
+    data[:, o] = cloud.opacity_logits
+    data[:, o + 1:o + 4] = cloud.log_scales
+    data[:, o + 4:o + 8] = cloud.quats
+    header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {n}\n"
+    header += "".join(f"property float {p}\n" for p in names) + "end_header\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        f.write(header.encode("ascii"))
+        f.write(data.astype("<f4").tobytes())
+    if write_labels:
+        np.save(_labels_path(path), cloud.labels)
+
+
+def _labels_path(path: Path) -> Path:
+    return path.with_name(path.name + ".labels.npy")
+
+
+def read_ply_header(path: str | Path) -> tuple[int, list[tuple[str, str]], int, list[tuple[str, int, int]]]:
+    """Parse a ply header: (vertex count, [(name, dtype)], byte offset of data, other elements)."""
+    path = Path(path)
+    try:
+        f = open(path, "rb")
+    except OSError as exc:
+        raise PlyError(f"{path}: cannot open ({exc.strerror}); check the path") from None
+    with f:
+        first = f.readline(64)
+        if first.strip() != b"ply":
+            raise PlyError(f"{path}: not a PLY file (no 'ply' magic); pass a Gaussian-splat .ply")
+        props: list[tuple[str, str]] = []
+        n_vertex = -1
+        elements: list[tuple[str, int, int]] = []  # (name, count, row bytes) of elements after vertex
+        current = None
+        fmt_ok = False
+        for _ in range(10000):
+            raw = f.readline(4096)
+            if not raw:
+                raise PlyError(f"{path}: header ends before 'end_header' (truncated file); re-export it")
+            try:
+                line = raw.decode("ascii").strip()
+            except UnicodeDecodeError:
+                raise PlyError(f"{path}: header is not ASCII (corrupt file); re-export it") from None
+            parts = line.split()
+            if not parts or parts[0] in ("comment", "obj_info"):
+                continue
+            if parts[0] == "format":
+                if len(parts) < 2 or parts[1] != "binary_little_endian":
+                    fmt = parts[1] if len(parts) > 1 else "?"
+                    raise PlyError(f"{path}: PLY format {fmt!r} is not supported; convert it to "
+                                   f"binary_little_endian (as written by 3DGS/nerfstudio)")
+                fmt_ok = True
+            elif parts[0] == "element":
+                if len(parts) != 3 or not parts[2].isdigit():
+                    raise PlyError(f"{path}: malformed element line {line!r}; re-export the file")
+                current = parts[1]
+                if current == "vertex":
+                    n_vertex = int(parts[2])
+                else:
+                    elements.append((current, int(parts[2]), 0))
+            elif parts[0] == "property":
+                if len(parts) >= 2 and parts[1] == "list":
+                    raise PlyError(f"{path}: list property in element {current!r} is not supported; export "
+                                   f"Gaussians only (no faces)")
+                if len(parts) != 3 or parts[1] not in _PLY_TYPES:
+                    raise PlyError(f"{path}: malformed property line {line!r}; re-export the file")
+                if current == "vertex":
+                    props.append((parts[2], "<" + _PLY_TYPES[parts[1]]))
+                elif elements:
+                    name, cnt, size = elements[-1]
+                    elements[-1] = (name, cnt, size + int(_PLY_TYPES[parts[1]][1]))
+            elif parts[0] == "end_header":
+                break
+            else:
+                raise PlyError(f"{path}: unexpected header line {line!r}; re-export the file")
+        else:
+            raise PlyError(f"{path}: header too long or missing 'end_header'; re-export the file")
+        if not fmt_ok:
+            raise PlyError(f"{path}: no 'format' line in the header; re-export the file")
+        if n_vertex < 0:
+            raise PlyError(f"{path}: no 'element vertex' in the header; pass a Gaussian-splat .ply")
+        return n_vertex, props, f.tell(), elements
+
+
+def read_ply(path: str | Path) -> GaussianCloud:
+    """Read a 3DGS ``.ply`` (reference trainer, nerfstudio export, or ours). Raises :class:`PlyError`."""
+    path = Path(path)
+    n, props, offset, _ = read_ply_header(path)
+    names = [p for p, _ in props]
+    if len(set(names)) != len(names):
+        raise PlyError(f"{path}: duplicate vertex property names; re-export the file")
+    required = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+                "rot_0", "rot_1", "rot_2", "rot_3"]
+    missing = [r for r in required if r not in names]
+    if missing:
+        raise PlyError(f"{path}: vertex lacks Gaussian properties {missing[:4]}; this is not a 3DGS splat "
+                       f"file (export one with 3DGS or 'ns-export gaussian-splat')")
+    n_rest = sum(1 for p in names if p.startswith("f_rest_"))
+    if n_rest not in REST_COUNT_TO_DEGREE:
+        raise PlyError(f"{path}: {n_rest} f_rest properties is not SH degree 0-3 (need 0, 9, 24 or 45); "
+                       f"re-export with a supported SH degree")
+    rest_names = [f"f_rest_{i}" for i in range(n_rest)]
+    if any(r not in names for r in rest_names):
+        raise PlyError(f"{path}: f_rest properties are not numbered 0..{n_rest - 1}; re-export the file")
+    dtype = np.dtype(props)
+    need = n * dtype.itemsize
+    with open(path, "rb") as f:
+        f.seek(offset)
+        buf = f.read(need)
+    if len(buf) < need:
+        raise PlyError(f"{path}: truncated: header promises {n} Gaussians ({need} bytes) but only {len(buf)} "
+                       f"bytes follow; re-download or re-export the file")
+    v = np.frombuffer(buf, dtype=dtype, count=n)
+
+    def cols(keys: list[str]) -> np.ndarray:
+        if not keys:
+            return np.zeros((n, 0), np.float32)
+        return np.stack([v[k].astype(np.float32) for k in keys], axis=1)
+
+    k = n_rest // 3 + 1
+    sh = np.zeros((n, k, 3), np.float32)
+    sh[:, 0, :] = cols(["f_dc_0", "f_dc_1", "f_dc_2"])
+    if n_rest:
+        sh[:, 1:, :] = cols(rest_names).reshape(n, 3, k - 1).transpose(0, 2, 1)
+    labels = None
+    if "label" in names:
+        labels = v["label"].astype(np.uint8)
+    elif _labels_path(path).exists():
+        lab = np.load(_labels_path(path))
+        if lab.shape == (n,):
+            labels = lab.astype(np.uint8)
+        else:
+            log.warning("%s: ignoring label sidecar of shape %s (expected (%d,))", path, lab.shape, n)
+    cloud = GaussianCloud(cols(["x", "y", "z"]), cols(["scale_0", "scale_1", "scale_2"]),
+                          cols(["rot_0", "rot_1", "rot_2", "rot_3"]), v["opacity"].astype(np.float32), sh, labels)
+    if not (np.isfinite(cloud.means).all() and np.isfinite(cloud.log_scales).all()):
+        raise PlyError(f"{path}: non-finite positions or scales (corrupt file); re-export it")
+    return cloud
