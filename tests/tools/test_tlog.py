@@ -256,6 +256,29 @@ def test_log_written_by_pymavlink_setup_logfile(tmp_path):
     assert te["n_samples"] == 300 and te["max_m"] == pytest.approx(0.02, abs=1e-5)
 
 
+def test_ardupilot_copter_mavlink1_guided(tmp_path):
+    """An ArduCopter log in MAVLink 1: mode names from pymavlink's ArduPilot table, GUIDED counts as offboard."""
+    veh = mav1.MAVLink(None, srcSystem=7, srcComponent=1)
+    out = bytearray()
+    modes = [0, 0, 4, 4, 4, 4, 9, 9]  # STABILIZE, GUIDED, LAND
+    for k, mode in enumerate(modes):
+        base = mav1.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav1.MAV_MODE_FLAG_SAFETY_ARMED if 0 < k < 7 else 0)
+        msg = mav1.MAVLink_heartbeat_message(mav1.MAV_TYPE_QUADROTOR, mav1.MAV_AUTOPILOT_ARDUPILOTMEGA, base,
+                                             mode, 4, 3)
+        out += struct.pack(">Q", T0_US + k * 1_000_000) + msg.pack(veh)
+        veh.seq += 1
+    path = tmp_path / "copter.tlog"
+    path.write_bytes(bytes(out))
+    m = analyse_tlog(path).metrics
+    assert m["vehicle"]["autopilot"] == "ArduPilot" and m["vehicle"]["type"] == "quadrotor"
+    assert m["framing"]["mavlink1"] == len(modes) and m["framing"]["mavlink2"] == 0
+    assert [(e["mode"], e["t_s"]) for e in m["modes"]["timeline"]] == [("STABILIZE", 0.0), ("GUIDED", 2.0),
+                                                                       ("LAND", 6.0)]
+    assert [(e["event"], e["t_s"]) for e in m["arm_events"]] == [("arm", 1.0), ("disarm", 7.0)]
+    assert m["offboard"]["offboard_time_s"] == pytest.approx(4.0)
+    assert m["offboard"]["setpoints"]["count"] == 0
+
+
 def test_latest_before_ties_follow_file_order():
     from tools.tlog.analysis import latest_before
 

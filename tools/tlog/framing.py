@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import re
 import struct
+from array import array
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -188,10 +189,10 @@ def _resync(data: bytes, start: int, n: int, last_ts: int | None, extras: dict[i
             return p  # a genuine jump in time
 
 
-def _scan_offsets(data: bytes, extras: dict[int, int], progress: bool) -> tuple[list[int], int, int, int]:
+def _scan_offsets(data: bytes, extras: dict[int, int], progress: bool) -> tuple[array, int, int, int]:
     """Record offsets, garbage bytes, garbage runs, trailing (incomplete) bytes."""
     n = len(data)
-    recs: list[int] = []
+    recs = array("q")  # 8 bytes per record, not a Python int object
     append = recs.append
     unpack_ts = _TS.unpack_from
     garbage = runs = trailing = 0
@@ -297,11 +298,18 @@ def looks_like_raw_mavlink(raw: bytes, mavlink_module: Any, need: int = 3) -> bo
     return False
 
 
+GATHER_CHUNK = 1 << 18  # rows per fancy-indexing step: bounds the int64 index temporaries on huge logs
+
+
 def _gather(buf: np.ndarray, start: np.ndarray, width: int) -> np.ndarray:
-    """Rows of ``width`` bytes starting at each offset (clipped to the buffer; callers mask)."""
-    idx = start[:, None] + np.arange(width, dtype=np.int64)[None, :]
-    np.minimum(idx, buf.size - 1, out=idx)
-    return buf[idx]
+    """(len(start), width) uint8 rows of bytes starting at each offset (clipped to the buffer; callers mask)."""
+    out = np.empty((start.size, width), dtype=np.uint8)
+    cols = np.arange(width, dtype=np.int64)[None, :]
+    for a in range(0, start.size, GATHER_CHUNK):
+        idx = start[a:a + GATHER_CHUNK, None] + cols
+        np.minimum(idx, buf.size - 1, out=idx)
+        out[a:a + GATHER_CHUNK] = buf[idx]
+    return out
 
 
 def _check_crcs(buf: np.ndarray, hdr: np.ndarray, hlen: np.ndarray, plen: np.ndarray,
@@ -312,10 +320,10 @@ def _check_crcs(buf: np.ndarray, hdr: np.ndarray, hlen: np.ndarray, plen: np.nda
     body = hlen + plen - 1  # bytes covered after STX, before CRC_EXTRA
     for blen in np.unique(body[known]):
         sel = np.flatnonzero(known & (body == blen))
-        rows = _gather(buf, hdr[sel] + 1, int(blen))
+        cols = np.ascontiguousarray(_gather(buf, hdr[sel] + 1, int(blen)).T)  # one contiguous row per byte
         crc = np.full(sel.size, 0xFFFF, dtype=np.uint32)
         for j in range(int(blen)):
-            crc = (crc >> 8) ^ _CRC_TABLE[(crc ^ rows[:, j]) & 0xFF]
+            crc = (crc >> 8) ^ _CRC_TABLE[(crc ^ cols[j]) & 0xFF]
         crc = (crc >> 8) ^ _CRC_TABLE[(crc ^ extra[sel].astype(np.uint32)) & 0xFF]
         cpos = hdr[sel] + 1 + blen
         wire = buf[cpos].astype(np.uint32) | (buf[cpos + 1].astype(np.uint32) << 8)
@@ -328,21 +336,25 @@ def scan_tlog(raw: bytes, mavlink_module: Any, progress: bool = False) -> Frames
     extras = {mid: cls.crc_extra for mid, cls in mavlink_module.mavlink_map.items()}
     recs, garbage, runs, trailing = _scan_offsets(raw, extras, progress)
     buf = np.frombuffer(raw, dtype=np.uint8)
-    rec = np.asarray(recs, dtype=np.int64)
+    rec = np.frombuffer(recs, dtype=np.int64) if len(recs) else np.zeros(0, dtype=np.int64)
     hdr = rec + 8
     if rec.size:
         ts = np.ascontiguousarray(_gather(buf, rec, 8)).view(">u8").ravel().astype(np.int64)
-        head = _gather(buf, hdr, 10).astype(np.int64)
+        head = np.ascontiguousarray(_gather(buf, hdr, 10).T)  # uint8, one row per header byte
     else:
         ts = np.zeros(0, dtype=np.int64)
-        head = np.zeros((0, 10), dtype=np.int64)
-    v2 = head[:, 0] == STX_V2
-    plen = head[:, 1]
-    seq = np.where(v2, head[:, 4], head[:, 2])
-    sysid = np.where(v2, head[:, 5], head[:, 3])
-    compid = np.where(v2, head[:, 6], head[:, 4])
-    msgid = np.where(v2, head[:, 7] | (head[:, 8] << 8) | (head[:, 9] << 16), head[:, 5])
-    signed = v2 & ((head[:, 2] & IFLAG_SIGNED) != 0)
+        head = np.zeros((10, 0), dtype=np.uint8)
+    v2 = head[0] == STX_V2
+
+    def col(j: int) -> np.ndarray:
+        return head[j].astype(np.int64)
+
+    plen = col(1)
+    seq = np.where(v2, head[4], head[2]).astype(np.int64)
+    sysid = np.where(v2, head[5], head[3]).astype(np.int64)
+    compid = np.where(v2, head[6], head[4]).astype(np.int64)
+    msgid = np.where(v2, col(7) | (col(8) << 8) | (col(9) << 16), col(5))
+    signed = v2 & ((head[2] & IFLAG_SIGNED) != 0)
     hlen = np.where(v2, 10, 6)
     size = 8 + hlen + plen + 2 + np.where(signed, SIGNATURE_LEN, 0)
     uids, inv = np.unique(msgid, return_inverse=True)
