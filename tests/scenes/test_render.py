@@ -68,7 +68,7 @@ def test_wall_depth_and_closed_wall_hides_background(light_spec):
         no_bg = render_splats(cloud.subset(np.nonzero(cloud.labels != LABEL_BACKGROUND)[0]), cam, pose)
         wall = res.label == LABEL_WALL
         diff = np.abs(res.rgb.astype(int) - no_bg.rgb)[wall]
-        assert diff.max() <= 3 and diff.mean() < 0.2
+        assert diff.max() <= 3 and diff.mean() < 0.5  # < 1 % of the background colour
         assert wall.mean() > 0.3
         if pose is START_POSE:
             assert np.abs(res.depth[wall] - light_spec.wall_x).max() <= 0.01 * light_spec.wall_x
