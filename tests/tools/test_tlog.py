@@ -256,6 +256,61 @@ def test_log_written_by_pymavlink_setup_logfile(tmp_path):
     assert te["n_samples"] == 300 and te["max_m"] == pytest.approx(0.02, abs=1e-5)
 
 
+def test_flowgap_truth_odometry_on_its_own_channel(tmp_path):
+    """flowgap's vehicle sends truth as ODOMETRY (LOCAL_NED, estimator MOCAP) with the autopilot's own ids
+    on a separate link: it is found as truth, and its separate sequence counter is not packet loss."""
+    main_ch = mav2.MAVLink(None, srcSystem=1, srcComponent=1)
+    truth_ch = mav2.MAVLink(None, srcSystem=1, srcComponent=1)
+    comp = mav2.MAVLink(None, srcSystem=1, srcComponent=191)
+    recs = []
+    nan21 = [float("nan")] + [0.0] * 20
+
+    def put(mav, t_s, msg):
+        recs.append(struct.pack(">Q", T0_US + round(t_s * 1e6)) + bytes(msg.pack(mav)))
+        mav.seq = (mav.seq + 1) % 256
+
+    for i in range(1000):  # 10 s at 100 Hz
+        t = i * 0.01
+        x = 0.1 * t
+        if i % 100 == 0:
+            put(main_ch, t, mav2.MAVLink_heartbeat_message(2, 12, 129, PX4_OFFBOARD, 4, 3))
+        if i % 5 == 0:
+            put(comp, t + 0.0001, mav2.MAVLink_set_position_target_local_ned_message(
+                int(t * 1000), 1, 1, 1, POS_ONLY, x + 0.05, 0, -1.5, *[0] * 8))
+        if i % 2 == 0:
+            put(main_ch, t + 0.0002, mav2.MAVLink_local_position_ned_message(int(t * 1000), x + 0.01, 0, -1.5,
+                                                                            0.1, 0, 0))
+            # the autopilot's own odometry (an estimate, not truth)
+            put(main_ch, t + 0.0003, mav2.MAVLink_odometry_message(int(t * 1e6), 1, 1, x + 5, 0, -1.5,
+                                                                  [1, 0, 0, 0], 0, 0, 0, 0, 0, 0, nan21, nan21,
+                                                                  0, mav2.MAV_ESTIMATOR_TYPE_NAIVE, 50))
+        put(truth_ch, t + 0.0004, mav2.MAVLink_odometry_message(int(t * 1e6), 1, 1, x, 0, -1.5, [1, 0, 0, 0],
+                                                               0.1, 0, 0, 0, 0, 0, nan21, nan21, 0,
+                                                               mav2.MAV_ESTIMATOR_TYPE_MOCAP, 100))
+    path = tmp_path / "flowgap_like.tlog"
+    path.write_bytes(b"".join(recs))
+    rep = analyse_tlog(path)
+    m = rep.metrics
+    assert m["components"]["1:1"]["lost"] == 0 and m["components"]["1:1"]["sequence_counters"] == 2
+    assert any("interleaved sequence counters" in n for n in rep.notes)
+    truth = m["offboard"]["truth"]
+    assert truth["source"] == "ODOMETRY from 1:1" and truth["samples"] == 1000
+    assert truth["estimate_error"]["max_m"] == pytest.approx(0.01, abs=1e-4)
+    assert truth["tracking_error"]["mean_m"] == pytest.approx(0.05, abs=0.01)
+
+
+def test_split_sequence_loss():
+    from tools.tlog.analysis import split_sequence_loss
+
+    a = list(range(250, 256)) + list(range(0, 40))
+    b = list(range(100, 146))
+    inter = [x for pair in zip(a, b, strict=True) for x in pair]
+    assert split_sequence_loss(inter) == (0, 2)
+    inter.pop(10)  # lose one packet of counter a
+    assert split_sequence_loss(inter) == (1, 2)
+    assert split_sequence_loss([0, 100, 200, 50, 150], max_counters=2) is None
+
+
 def test_ardupilot_copter_mavlink1_guided(tmp_path):
     """An ArduCopter log in MAVLink 1: mode names from pymavlink's ArduPilot table, GUIDED counts as offboard."""
     veh = mav1.MAVLink(None, srcSystem=7, srcComponent=1)

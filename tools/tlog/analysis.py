@@ -18,13 +18,19 @@ Definitions used in the metrics (all times are tlog receive times, seconds from 
   interval lasts from the heartbeat that shows the mode to the next heartbeat that shows another mode
   (or the end of the log).
 - *packet loss* per link (sysid, compid): from MAVLink sequence numbers, lost = sum((seq_i - seq_{i-1} - 1)
-  mod 256) over consecutive packets, duplicates (same seq) not counted as loss.
+  mod 256) over consecutive packets, duplicates (same seq) not counted as loss. When that exceeds 5 % and
+  the packets split into at most 4 interleaved counters (two channels of one component logged together)
+  with less than half the loss, the per-counter loss is reported instead, with a note.
+- *ground truth*: the first of TRUTH_SOURCES found (ATT_POS_MOCAP; ODOMETRY in a local frame marked
+  MAV_ESTIMATOR_TYPE_MOCAP, as flowgap's simulator sends it, or from a component other than the estimate's;
+  LOCAL_POSITION_NED_COV or LOCAL_POSITION_NED from another component).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -54,13 +60,37 @@ EVENT_MESSAGES = ("HEARTBEAT", "STATUSTEXT", "COMMAND_LONG", "COMMAND_INT", "COM
 
 # --- ground truth sources (pluggable) -----------------------------------------------------------------
 
+MAV_ESTIMATOR_TYPE_MOCAP = 6
+LOCAL_FRAMES = (1, 18, 20)  # MAV_FRAME_LOCAL_NED, MAV_FRAME_MOCAP_NED, MAV_FRAME_LOCAL_FRD
+
+
+def _external_only(rows: np.ndarray, from_estimator: np.ndarray) -> np.ndarray:
+    return ~from_estimator
+
+
+def _odometry_truth(rows: np.ndarray, from_estimator: np.ndarray) -> np.ndarray:
+    """ODOMETRY in a local frame that is marked as motion capture (flowgap's simulator truth stream is
+    ODOMETRY LOCAL_NED, estimator MOCAP, from the autopilot's own ids), or comes from another component."""
+    local = np.isin(rows["frame_id"], LOCAL_FRAMES)
+    return local & ((rows["estimator_type"] == MAV_ESTIMATOR_TYPE_MOCAP) | ~from_estimator)
+
+
+def _any(rows: np.ndarray, from_estimator: np.ndarray) -> np.ndarray:
+    return np.ones(rows.size, dtype=bool)
+
+
 @dataclass(frozen=True)
 class TruthSource:
-    """A message type that may carry the vehicle's true position in NED metres."""
+    """A message type that may carry the vehicle's true position (x, y, z fields, NED metres).
+
+    ``accept(rows, from_estimator)`` picks the rows that count as truth; ``from_estimator`` marks rows sent
+    by the component whose LOCAL_POSITION_NED is the estimate.
+    """
 
     name: str
     message: str
     description: str
+    accept: Callable[[np.ndarray, np.ndarray], np.ndarray] = _any
 
     def positions(self, rows: np.ndarray) -> np.ndarray:
         return np.stack([rows["x"], rows["y"], rows["z"]], axis=1).astype(np.float64)
@@ -68,13 +98,16 @@ class TruthSource:
 
 TRUTH_SOURCES: dict[str, TruthSource] = {
     s.name: s for s in (
-        TruthSource("att_pos_mocap", "ATT_POS_MOCAP", "motion-capture / simulator pose (x, y, z NED)"),
-        TruthSource("local_position_ned_cov", "LOCAL_POSITION_NED_COV", "position with covariance"),
-        TruthSource("odometry", "ODOMETRY", "odometry (x, y, z)"),
-        TruthSource("local_position_ned", "LOCAL_POSITION_NED", "a second LOCAL_POSITION_NED stream"),
+        TruthSource("att_pos_mocap", "ATT_POS_MOCAP", "motion-capture / simulator pose"),
+        TruthSource("odometry", "ODOMETRY", "ODOMETRY marked MOCAP, or from a non-estimator component",
+                    _odometry_truth),
+        TruthSource("local_position_ned_cov", "LOCAL_POSITION_NED_COV", "position with covariance",
+                    _external_only),
+        TruthSource("local_position_ned", "LOCAL_POSITION_NED", "a second LOCAL_POSITION_NED stream",
+                    _external_only),
     )
 }
-TRUTH_AUTO_ORDER = ("att_pos_mocap", "local_position_ned_cov", "odometry", "local_position_ned")
+TRUTH_AUTO_ORDER = tuple(TRUTH_SOURCES)
 
 
 def parse_truth_option(text: str) -> tuple[str, tuple[int, int] | None]:
@@ -268,6 +301,29 @@ def _framing_notes(rep: Report, f: Frames, mav: Any) -> None:
     rep.metrics["framing"] = fr
 
 
+def split_sequence_loss(seqs: list[int], max_gap: int = 64, max_counters: int = 4) -> tuple[int, int] | None:
+    """Loss on a link whose packets come from several interleaved sequence counters.
+
+    Greedily assigns each packet to the counter it continues with the smallest forward step (1..max_gap);
+    returns (lost, counters), or None when more than ``max_counters`` would be needed.
+    """
+    streams: list[list[int]] = []  # [last seq, lost]
+    for s in seqs:
+        best, best_d = None, max_gap + 1
+        for st in streams:
+            d = (s - st[0]) & 0xFF
+            if 0 < d < best_d:
+                best, best_d = st, d
+        if best is None:
+            if len(streams) == max_counters:
+                return None
+            streams.append([s, 0])
+        else:
+            best[0] = s
+            best[1] += best_d - 1
+    return sum(st[1] for st in streams), len(streams)
+
+
 def _summary(rep: Report, f: Frames, mav: Any) -> None:
     good = f.good
     t0 = int(f.ts.min())
@@ -314,8 +370,16 @@ def _summary(rep: Report, f: Frames, mav: Any) -> None:
         dup = int((d == 0).sum())
         n = int(sel.sum())
         s, c = int(key) // 256, int(key) % 256
+        counters = 1
+        if n >= 20 and lost > 0.05 * (n + lost):
+            split = split_sequence_loss(seq.tolist())
+            if split is not None and split[0] < lost / 2:
+                lost, counters = split
+                dup = 0
+                rep.note(f"link {s}:{c} carries {counters} interleaved sequence counters (several channels "
+                         "logged together, e.g. a separate truth stream): loss counted per counter")
         comps[f"{s}:{c}"] = {"sysid": s, "compid": c, "component": _enum_name(mav, "MAV_COMPONENT", c, "MAV_COMP_ID_"),
-                             "packets": n, "lost": lost, "duplicates": dup,
+                             "packets": n, "lost": lost, "duplicates": dup, "sequence_counters": counters,
                              "loss_pct": 100.0 * lost / (n + lost) if n + lost else 0.0}
         lost_total += lost
         recv_total += n
@@ -507,9 +571,11 @@ def _truth(rep: Report, f: Frames, mav: Any, name: str, src: tuple[int, int] | N
     candidates = TRUTH_AUTO_ORDER if name == "auto" else (name,)
     for cand in candidates:
         ts_ = TRUTH_SOURCES[cand]
-        idx, rows = _stream(f, mav, ts_.message, src=src, exclude=None if src else est_src)
-        if ts_.message == "ODOMETRY" and idx.size:
-            keep = np.isin(rows["frame_id"], (1, 18, 20))  # LOCAL_NED, MOCAP_NED, LOCAL_FRD
+        idx, rows = _stream(f, mav, ts_.message, src=src)
+        if idx.size and src is None:
+            from_est = ((f.sysid[idx] == est_src[0]) & (f.compid[idx] == est_src[1]) if est_src is not None
+                        else np.zeros(idx.size, dtype=bool))
+            keep = ts_.accept(rows, from_est)
             idx, rows = idx[keep], rows[keep]
         if idx.size == 0:
             continue
