@@ -263,3 +263,30 @@ def test_convex_upsampling_of_constant_flow_is_exact_inside():
     assert torch.allclose(inner[0], torch.full_like(inner[0], 10.0))
     assert torch.allclose(inner[1], torch.full_like(inner[1], -4.0))
     assert not torch.allclose(up[0, 0, :8], torch.full((8, 40), 10.0))
+
+
+def test_converter_writes_flowgap_layout(tmp_path, capsys):
+    from companion.flow.raft.convert import main
+
+    model = random_model("small", seed=5)
+    torch.save(ours_to_torchvision(model.state_dict(), "small"), tmp_path / "tv.pth")
+    assert main([str(tmp_path / "tv.pth"), str(tmp_path / "out.pth")]) == 0
+    assert "torchvision layout, RAFT-small" in capsys.readouterr().out
+    obj = torch.load(tmp_path / "out.pth", weights_only=True)
+    assert obj["format"] == "flowgap-raft" and obj["variant"] == "small"
+    img1, img2 = textured_pair(64, 64, (1.0, 0.0))
+    a = make_flow_backend("raft", weights=tmp_path / "tv.pth", iters=1).estimate(img1, img2)
+    b = make_flow_backend("raft", weights=tmp_path / "out.pth", iters=1).estimate(img1, img2)
+    assert np.array_equal(a, b)
+    assert main([str(tmp_path / "absent.pth"), str(tmp_path / "x.pth")]) == 1
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_cuda_matches_cpu():
+    torch.backends.cuda.matmul.allow_tf32 = False       # compare like with like
+    torch.backends.cudnn.allow_tf32 = False
+    img1, img2 = textured_pair(64, 64, (1.0, 0.5))
+    cpu = make_flow_backend("raft", random_init_seed=4, iters=3).estimate(img1, img2)
+    gpu = make_flow_backend("raft", random_init_seed=4, iters=3, device="cuda")
+    assert gpu.device.startswith("cuda")
+    np.testing.assert_allclose(gpu.estimate(img1, img2), cpu, atol=2e-2, rtol=1e-3)
