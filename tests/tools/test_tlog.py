@@ -91,6 +91,9 @@ def synthetic_flight(seed: int = 0, with_truth: bool = True, with_positions: boo
                                                              0, 0, 0, 3))
     put(veh, 0.1, mav2.MAVLink_statustext_message(mav2.MAV_SEVERITY_INFO, b"synthetic PX4 ready"))
     put(veh, 17.2, mav2.MAVLink_statustext_message(mav2.MAV_SEVERITY_NOTICE, b"landed, disarming"))
+    long_text = b"x" * 50 + b"tail of a long text"  # MAVLink 2 chunked STATUSTEXT
+    put(veh, 17.3, mav2.MAVLink_statustext_message(mav2.MAV_SEVERITY_INFO, long_text[:50], 7, 0))
+    put(veh, 17.3001, mav2.MAVLink_statustext_message(mav2.MAV_SEVERITY_INFO, long_text[50:], 7, 1))
     # setpoints: a slow path forward and up, 20 Hz from 4.0 s to 13.95 s
     target = lambda t: (0.3 * (t - 4.0), 0.1 * np.sin(t), -1.5 - 0.05 * (t - 4.0))  # noqa: E731
     for i in range(200):
@@ -180,7 +183,8 @@ def test_synthetic_flight_counts_and_summary(flight, flight_path):
     assert m["components"]["1:1"]["lost"] == flight.dropped == 5
     assert m["components"]["1:191"]["lost"] == 0 and m["components"]["1:197"]["lost"] == 0
     assert m["messages"]["by_type"]["HEARTBEAT"]["sources"] == {"1:1": 18, "1:191": 18, "255:190": 18}
-    assert [s["text"] for s in m["statustext"]] == ["synthetic PX4 ready", "landed, disarming"]
+    assert [s["text"] for s in m["statustext"]] == ["synthetic PX4 ready", "landed, disarming",
+                                                   "x" * 50 + "tail of a long text"]
 
 
 def test_synthetic_flight_modes_and_arming(flight, flight_path):

@@ -443,13 +443,23 @@ def _events(rep: Report, f: Frames, mav_mod: Any) -> None:
     rep.metrics["modes"] = {"timeline": timeline, "mode_changes": max(len(timeline) - 1, 0)}
     rep.metrics["arm_events"] = arm_events
     # STATUSTEXT and commands
-    texts = []
+    texts: list[dict[str, Any]] = []
+    open_chunks: dict[tuple[str, int], dict[str, Any]] = {}  # MAVLink 2 long texts: chunks share an id > 0
     st_sel = np.flatnonzero((f.msgid == name_to_id["STATUSTEXT"]) & f.good)
     for i, m in decode_messages(f, mav, st_sel):
         text = m.text.decode("utf-8", "replace") if isinstance(m.text, bytes | bytearray) else str(m.text)
-        texts.append({"t_s": (int(f.ts[i]) - t0) / 1e6, "source": f"{int(f.sysid[i])}:{int(f.compid[i])}",
-                      "severity": _enum_name(mav_mod, "MAV_SEVERITY", m.severity, "MAV_SEVERITY_"),
-                      "text": text})
+        source = f"{int(f.sysid[i])}:{int(f.compid[i])}"
+        t = (int(f.ts[i]) - t0) / 1e6
+        chunk_id = int(getattr(m, "id", 0) or 0)
+        prev = open_chunks.get((source, chunk_id)) if chunk_id else None
+        if prev is not None and int(getattr(m, "chunk_seq", 0)) > 0 and t - prev["t_s"] < 2.0:
+            prev["text"] += text
+            continue
+        entry = {"t_s": t, "source": source,
+                 "severity": _enum_name(mav_mod, "MAV_SEVERITY", m.severity, "MAV_SEVERITY_"), "text": text}
+        texts.append(entry)
+        if chunk_id:
+            open_chunks[(source, chunk_id)] = entry
     rep.metrics["statustext"] = texts
     acks = []
     ack_sel = np.flatnonzero((f.msgid == name_to_id["COMMAND_ACK"]) & f.good)
