@@ -424,6 +424,22 @@ def test_no_position_messages(tmp_path):
     assert rep.metrics["offboard"]["setpoints"]["count"] == 194
 
 
+def test_an_unforeseen_failure_in_one_stage_keeps_the_rest(flight_path, tmp_path, monkeypatch):
+    import tools.tlog.analysis as analysis
+    from tools.tlog import summary_text
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("unforeseen")
+
+    monkeypatch.setattr(analysis, "_events", boom)
+    rep = analyse_tlog(flight_path)
+    assert rep.usable and any("events analysis failed" in n and "unforeseen" in n for n in rep.notes)
+    assert rep.metrics["messages"]["total"] > 0 and rep.metrics["modes"]["timeline"] == []
+    assert rep.metrics["offboard"]["setpoints"]["count"] == 194 and len(rep.notes) == 1
+    write_outputs(rep, tmp_path, plots=False)
+    assert "unforeseen" in (tmp_path / "report.md").read_text() and summary_text(rep)
+
+
 def test_empty_and_not_a_tlog(tmp_path, capsys):
     empty = tmp_path / "empty.tlog"
     empty.write_bytes(b"")

@@ -242,7 +242,11 @@ def analyse_tlog(path: str | Path, *, truth: str = "auto", dialect: str = "ardup
     except OSError as exc:
         rep.note(f"cannot read {path}: {exc.strerror or exc}")
         return rep
-    mav_mod = load_dialect(dialect)
+    try:
+        mav_mod = load_dialect(dialect)
+    except ImportError:
+        rep.note(f"unknown pymavlink dialect {dialect!r}")
+        return rep
     rep.mavlink = mav_mod
     rep.metrics["file_bytes"] = len(raw)
     if not raw:
@@ -261,17 +265,33 @@ def analyse_tlog(path: str | Path, *, truth: str = "auto", dialect: str = "ardup
         _empty_metrics(rep)
         return rep
     rep.usable = True
-    _framing_notes(rep, frames, mav_mod)
-    _summary(rep, frames, mav_mod)
-    _events(rep, frames, mav_mod)
-    _offboard(rep, frames, mav_mod, truth_name, truth_src)
+    stages = (("framing", lambda: _framing_notes(rep, frames, mav_mod)),
+              ("summary", lambda: _summary(rep, frames, mav_mod)),
+              ("events", lambda: _events(rep, frames, mav_mod)),
+              ("offboard", lambda: _offboard(rep, frames, mav_mod, truth_name, truth_src)))
+    for name, stage in stages:
+        try:
+            stage()
+        except Exception as exc:  # noqa: BLE001 - a log we did not foresee: keep what the other stages give
+            log.debug("stage %s failed", name, exc_info=True)
+            rep.note(f"the {name} analysis failed on this log ({type(exc).__name__}: {exc}); "
+                     "its part of the report is missing")
+    _empty_metrics(rep)
     return rep
 
 
 def _empty_metrics(rep: Report) -> None:
-    rep.metrics.update({"duration_s": 0.0, "messages": {"total": 0, "by_type": {}}, "components": {},
-                        "vehicle": None, "modes": {"timeline": [], "mode_changes": 0},
-                        "arm_events": [], "statustext": [], "offboard": None})
+    """Fill whatever a failed or skipped stage left out with empty values."""
+    defaults: dict[str, Any] = {
+        "duration_s": 0.0, "start_utc": None, "file_bytes": rep.metrics.get("file_bytes", 0),
+        "framing": {"packets": 0, "mavlink1": 0, "mavlink2": 0, "signed": 0, "crc_failures": 0,
+                    "unknown_id_packets": 0, "garbage_bytes": 0, "garbage_runs": 0, "truncated_tail_bytes": 0},
+        "messages": {"total": 0, "types": 0, "by_type": {}}, "components": {}, "systems": [],
+        "packet_loss": {"received": 0, "lost": 0, "loss_pct": 0.0}, "vehicle": None,
+        "modes": {"timeline": [], "mode_changes": 0}, "arm_events": [], "statustext": [], "command_acks": [],
+        "offboard": None}
+    for k, v in defaults.items():
+        rep.metrics.setdefault(k, v)
 
 
 def _framing_notes(rep: Report, f: Frames, mav: Any) -> None:
@@ -549,7 +569,7 @@ def _offboard(rep: Report, f: Frames, mav: Any, truth_name: str, truth_src: tupl
     sp_xyz = np.stack([sp["x"], sp["y"], sp["z"]], axis=1)[pos_ok].astype(np.float64) if n_sp else np.zeros((0, 3))
     rep.series.update(t_sp=(t_sp - t0) / 1e6, sp=sp_xyz)
     # offboard time
-    timeline = rep.metrics["modes"]["timeline"]
+    timeline = rep.metrics.get("modes", {}).get("timeline", [])
     intervals = [(e["t_s"], e["until_s"]) for e in timeline if e["mode"] in OFFBOARD_MODES]
     off["offboard_time_s"] = float(sum(b - a for a, b in intervals))
     off["offboard_entries"] = len(intervals)
