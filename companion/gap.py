@@ -200,7 +200,12 @@ def estimate_translation(flow: np.ndarray, focal_px: float, principal_point: tup
 
 def inverse_depth_from_flow(flow: np.ndarray, motion: CameraMotion = CameraMotion(),
                             config: ParallaxGapConfig = ParallaxGapConfig()) -> tuple[np.ndarray, np.ndarray]:
-    """Relative inverse depth ρ (arbitrary positive scale) and the mask of pixels where it was measurable."""
+    """Inverse depth ρ = |T|/Z per pixel and the mask of pixels where it was measurable.
+
+    T is the camera translation between the frames (only its direction is used, so ρ is Z's inverse in
+    units of the step length: Z = |T|/ρ), Z the depth along the optical axis.  Pixels too close to the
+    focus of expansion (|g| < ``min_g_frac``·max|g|) or with non-finite flow are NaN / invalid.
+    """
     h, w = flow.shape[:2]
     f = motion.focal_px or (h / 2.0) / np.tan(np.radians(config.vfov_deg) / 2.0)
     cx, cy = motion.principal_point or ((w - 1) / 2.0, (h - 1) / 2.0)

@@ -100,3 +100,15 @@ def test_parallax_detector_sees_no_gap_on_wall_and_floor():
     flow2, truth = translation_flow(h, w, (0.2, 0.0, 1.0), QUAD)
     flow2 *= ramp[:, None, None].astype(np.float32)
     assert iou(detect_gap_parallax(flow2).mask, truth) >= 0.95
+
+
+def test_inverse_depth_is_step_over_depth():
+    # ρ = |T|/Z: with the synthetic field's scale 0.3 and ρ_near 0.5, the wall reads 0.15 for a unit step
+    from companion.gap import inverse_depth_from_flow
+
+    flow, truth = translation_flow(H, W, (0.3, -0.1, 1.0), QUAD, rho_near=0.5, rho_far=0.05)
+    rho, valid = inverse_depth_from_flow(flow, CameraMotion(focal_px=FOCAL_320x240))
+    np.testing.assert_allclose(np.nanmedian(rho[valid & ~truth]), 0.15 * np.linalg.norm((0.3, -0.1, 1.0)),
+                               rtol=1e-3)
+    np.testing.assert_allclose(np.nanmedian(rho[valid & truth]), 0.015 * np.linalg.norm((0.3, -0.1, 1.0)),
+                               rtol=1e-3)
