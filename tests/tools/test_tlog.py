@@ -385,7 +385,7 @@ def test_garbage_truncation_and_unknown_ids(flight, tmp_path):
     recs = sorted(flight.records, key=lambda r: r[0])
     rng = np.random.default_rng(7)
     out = bytearray()
-    garbage_at = set(rng.choice(len(recs) - 1, 12, replace=False).tolist())
+    garbage_at = set(rng.choice(len(recs) - 1, 12, replace=False).tolist()) | {0}  # also right after the 1st
     injected = 0
     for k, (t, pkt, _) in enumerate(recs):
         out += struct.pack(">Q", t) + pkt

@@ -182,6 +182,8 @@ def _resync(data: bytes, start: int, n: int, last_ts: int | None, extras: dict[i
                     return p  # the whole file is one record
             elif chain and _packet_crc_ok(data, p, size, msgid, extras) is not False:
                 return p
+            elif p == 0 and _packet_crc_ok(data, p, size, msgid, extras):
+                return p  # the file starts with a good packet, damage right after it
         elif in_window:
             if chain or _packet_crc_ok(data, p, size, msgid, extras):
                 return p
