@@ -616,7 +616,10 @@ def _truth(rep: Report, f: Frames, mav: Any, name: str, src: tuple[int, int] | N
         tr = ts_.positions(rows)
         rep.series.update(t_truth=(t_tr - t0) / 1e6, truth=tr)
         out: dict[str, Any] = {"source": f"{ts_.message} from {where[0]}:{where[1]}", "samples": int(idx.size)}
-        out["tracking_error"] = tracking_stats(t_tr, tr, t_sp, sp_xyz, None, idx, i_sp)[0] if t_sp.size else None
+        out["tracking_error"] = None
+        if t_sp.size:
+            out["tracking_error"], t_used, err = tracking_stats(t_tr, tr, t_sp, sp_xyz, None, idx, i_sp)
+            rep.series.update(t_err_truth=(t_used - t0) / 1e6, err_truth=err)
         if t_est.size > 1 and t_tr.size:
             # estimate error: truth vs the estimate interpolated at truth times (within the estimate's span)
             inside = (t_tr >= t_est[0]) & (t_tr <= t_est[-1])

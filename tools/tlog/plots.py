@@ -209,9 +209,14 @@ def make_plots(rep: Any, out_dir: Path, scene: dict[str, Any] | None = None) -> 
         fig.savefig(out_dir / "altitude_speed.png", dpi=110)
         plt.close(fig)
         out["altitude_speed"] = "altitude_speed.png"
-    if s.get("err") is not None and len(s["err"]):
+    has_err = s.get("err") is not None and len(s["err"])
+    has_err_truth = s.get("err_truth") is not None and len(s["err_truth"])
+    if has_err or has_err_truth:
         fig, ax = plt.subplots(figsize=(9, 3.5))
-        ax.plot(s["t_err"], s["err"], color="tab:red", lw=1, label="|estimate − setpoint|")
+        if has_err:
+            ax.plot(s["t_err"], s["err"], color="tab:red", lw=1, label="|estimate − setpoint|")
+        if has_err_truth:
+            ax.plot(s["t_err_truth"], s["err_truth"], color="k", lw=0.8, alpha=0.7, label="|truth − setpoint|")
         for a, b in rep.metrics.get("offboard", {}).get("offboard_intervals_s", []):
             ax.axvspan(a, b, color="tab:green", alpha=0.08)
         ax.set_xlabel("time [s]")
