@@ -290,3 +290,44 @@ def test_cuda_matches_cpu():
     gpu = make_flow_backend("raft", random_init_seed=4, iters=3, device="cuda")
     assert gpu.device.startswith("cuda")
     np.testing.assert_allclose(gpu.estimate(img1, img2), cpu, atol=2e-2, rtol=1e-3)
+
+
+def contraction_weights(backend, alpha: float = 0.5, target=(1.5, -0.75), eps: float = 1e-2) -> None:
+    """Hand-set RAFT-small update weights so that each iteration does flow += alpha·(target − flow).
+
+    The motion features end with the raw flow; the GRU's update gate is forced open (z = 1) and its candidate
+    carries tanh(eps·flow) in hidden channels 0–1; the flow head splits them into ± ReLU parts and maps them
+    back to −alpha·flow, plus alpha·target as bias.  A contraction: any start converges to the target.
+    """
+    ub = backend.model.update_block
+    hidden, flow_ch = 96, 96 + 64 + 80                      # h, then x = [context 64, motion 80 + flow 2]
+    with torch.no_grad():
+        for conv in (ub.gru.convz, ub.gru.convr, ub.gru.convq, ub.flow_head.conv1, ub.flow_head.conv2):
+            conv.weight.zero_()
+            conv.bias.zero_()
+        ub.gru.convz.bias.fill_(30.0)
+        ub.gru.convq.weight[0, flow_ch, 1, 1] = eps
+        ub.gru.convq.weight[1, flow_ch + 1, 1, 1] = eps
+        for k in range(2):
+            ub.flow_head.conv1.weight[2 * k, k, 1, 1] = 1.0
+            ub.flow_head.conv1.weight[2 * k + 1, k, 1, 1] = -1.0
+            ub.flow_head.conv2.weight[k, 2 * k, 1, 1] = -alpha / eps
+            ub.flow_head.conv2.weight[k, 2 * k + 1, 1, 1] = alpha / eps
+            ub.flow_head.conv2.bias[k] = alpha * target[k] / 8.0     # the loop works in 1/8-res pixels
+    assert hidden == ub.gru.convz.out_channels
+
+
+def test_warm_start_converges_to_cold_result_with_enough_iterations():
+    img1, img2 = textured_pair(64, 64, (1.0, 0.5))
+    backend = make_flow_backend("raft", random_init_seed=6)
+    contraction_weights(backend)
+    init = np.zeros((64, 64, 2), np.float32)
+    init[..., 0], init[..., 1] = -3.0, 2.0
+    few_cold = backend.estimate(img1, img2, iters=2)
+    few_warm = backend.estimate(img1, img2, iters=2, flow_init=init)
+    assert np.abs(few_warm - few_cold).max() > 0.5          # the start matters after a few iterations (0.75)
+    cold = backend.estimate(img1, img2, iters=30)
+    warm = backend.estimate(img1, img2, iters=30, flow_init=init)
+    np.testing.assert_allclose(warm, cold, atol=1e-3)       # ... and not after enough of them
+    np.testing.assert_allclose(cold[..., 0], 1.5, atol=2e-3)
+    np.testing.assert_allclose(cold[..., 1], -0.75, atol=2e-3)
