@@ -142,7 +142,7 @@ def build_scene(spec: SceneSpec) -> GaussianCloud:
             axes = np.stack([tangent, np.array([1.0, 0.0, 0.0]), normal], 1)
             if np.linalg.det(axes) < 0:
                 axes[:, 1] *= -1
-            rgb = _texture_at(wall_tex, py, pz, y_lo, z_lo, wall.width, wall.height) * 0.85
+            rgb = _texture_at(wall_tex, py, pz, y_lo, z_lo, wall.width, wall.height) * 0.95
             parts.append(_surface(pts, rgb, axes, d.sigma_factor * s, d.opacity, LABEL_WALL))
 
     # frames

@@ -92,7 +92,7 @@ class JitterSpec:
 @dataclass(frozen=True)
 class SplatDensity:
     wall_spacing: float = 0.013        # grid spacing of wall Gaussians [m]
-    background_spacing: float = 0.02
+    background_spacing: float = 0.025
     floor_spacing: float = 0.03
     sigma_factor: float = 0.7          # in-plane sigma = factor * spacing
     opacity: float = 0.95

@@ -29,7 +29,6 @@ from scenes.render.common import (
     SIGMA_EXTENT,
     T_MIN,
     RenderResult,
-    finish,
 )
 
 BAND_ROWS = 8
@@ -38,13 +37,53 @@ _C3 = np.array(SH_C3)
 
 
 @njit(parallel=True, cache=True, fastmath=True)
-def project_kernel(means: np.ndarray, log_scales: np.ndarray, quats: np.ndarray, opacity_logits: np.ndarray,
+def prepare_kernel(log_scales: np.ndarray, quats: np.ndarray, opacity_logits: np.ndarray, sh: np.ndarray,
+                   cov: np.ndarray, reach: np.ndarray, opacity: np.ndarray, rgb0: np.ndarray) -> None:
+    """View-independent per-Gaussian terms, computed once per cloud: world covariance (N,6) [xx xy xz yy yz
+    zz], 3-sigma reach (N,), opacity (N,), and the degree-0 colour (N,3)."""
+    for i in prange(log_scales.shape[0]):
+        s0 = math.exp(log_scales[i, 0])
+        s1 = math.exp(log_scales[i, 1])
+        s2 = math.exp(log_scales[i, 2])
+        reach[i] = SIGMA_EXTENT * max(s0, max(s1, s2))
+        qw, qx, qy, qz = quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3]
+        qn = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        if qn == 0.0:
+            qn = 1.0
+            qw = 1.0
+        qw /= qn
+        qx /= qn
+        qy /= qn
+        qz /= qn
+        m00 = (1 - 2 * (qy * qy + qz * qz)) * s0
+        m01 = 2 * (qx * qy - qw * qz) * s1
+        m02 = 2 * (qx * qz + qw * qy) * s2
+        m10 = 2 * (qx * qy + qw * qz) * s0
+        m11 = (1 - 2 * (qx * qx + qz * qz)) * s1
+        m12 = 2 * (qy * qz - qw * qx) * s2
+        m20 = 2 * (qx * qz - qw * qy) * s0
+        m21 = 2 * (qy * qz + qw * qx) * s1
+        m22 = (1 - 2 * (qx * qx + qy * qy)) * s2
+        cov[i, 0] = m00 * m00 + m01 * m01 + m02 * m02
+        cov[i, 1] = m00 * m10 + m01 * m11 + m02 * m12
+        cov[i, 2] = m00 * m20 + m01 * m21 + m02 * m22
+        cov[i, 3] = m10 * m10 + m11 * m11 + m12 * m12
+        cov[i, 4] = m10 * m20 + m11 * m21 + m12 * m22
+        cov[i, 5] = m20 * m20 + m21 * m21 + m22 * m22
+        opacity[i] = 1.0 / (1.0 + math.exp(-opacity_logits[i]))
+        for c in range(3):
+            rgb0[i, c] = max(sh[i, 0, c] * SH_C0 + 0.5, 0.0)
+
+
+@njit(parallel=True, cache=True, fastmath=True)
+def project_kernel(means: np.ndarray, cov3: np.ndarray, reach3: np.ndarray, opac: np.ndarray, rgb0: np.ndarray,
                    sh: np.ndarray, R: np.ndarray, t: np.ndarray, centre: np.ndarray, fx: float, fy: float,
                    cx: float, cy: float, width: int, height: int, near: float, far: float,
                    uv: np.ndarray, conic: np.ndarray, depth: np.ndarray, rgb: np.ndarray, opacity: np.ndarray,
                    box: np.ndarray, visible: np.ndarray) -> None:
-    """Project N Gaussians. Inputs (N,3), (N,3), (N,4), (N,), (N,K,3); outputs (N,2), (N,3), (N,), (N,3),
-    (N,), (N,4) int32 [col0, col1, row0, row1], (N,) bool."""
+    """Project N Gaussians. Inputs (N,3) means, (N,6) world covariances, (N,) reach, (N,) opacity, (N,3)
+    degree-0 colour, (N,K,3) SH; outputs (N,2), (N,3), (N,), (N,3), (N,), (N,4) int32 [col0, col1, row0,
+    row1], (N,) bool."""
     n = means.shape[0]
     k = sh.shape[1]
     limx = JACOBIAN_CLAMP * 0.5 * width / fx
@@ -62,57 +101,34 @@ def project_kernel(means: np.ndarray, log_scales: np.ndarray, quats: np.ndarray,
         z = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz + t[2]
         if z <= near or z >= far:
             continue
-        s0 = math.exp(log_scales[i, 0])
-        s1 = math.exp(log_scales[i, 1])
-        s2 = math.exp(log_scales[i, 2])
-        reach = SIGMA_EXTENT * max(s0, max(s1, s2)) + 1e-3 * z
+        reach = reach3[i] + 1e-3 * z
         if (fx * x + cx * z) / nl < -reach or ((width - cx) * z - fx * x) / nr < -reach:
             continue
         if (fy * y + cy * z) / nt < -reach or ((height - cy) * z - fy * y) / nb < -reach:
             continue
-        qw, qx, qy, qz = quats[i, 0], quats[i, 1], quats[i, 2], quats[i, 3]
-        qn = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        if qn == 0.0:
-            continue
-        qw /= qn
-        qx /= qn
-        qy /= qn
-        qz /= qn
-        r00 = 1 - 2 * (qy * qy + qz * qz)
-        r01 = 2 * (qx * qy - qw * qz)
-        r02 = 2 * (qx * qz + qw * qy)
-        r10 = 2 * (qx * qy + qw * qz)
-        r11 = 1 - 2 * (qx * qx + qz * qz)
-        r12 = 2 * (qy * qz - qw * qx)
-        r20 = 2 * (qx * qz - qw * qy)
-        r21 = 2 * (qy * qz + qw * qx)
-        r22 = 1 - 2 * (qx * qx + qy * qy)
-        # M = Rq diag(s) (world); A = J R M (2x3)
-        m00, m01, m02 = r00 * s0, r01 * s1, r02 * s2
-        m10, m11, m12 = r10 * s0, r11 * s1, r12 * s2
-        m20, m21, m22 = r20 * s0, r21 * s1, r22 * s2
         tx = z * min(limx, max(-limx, x / z))
         ty = z * min(limy, max(-limy, y / z))
         j00 = fx / z
         j02 = -fx * tx / (z * z)
         j11 = fy / z
         j12 = -fy * ty / (z * z)
-        # W = J R (2x3)
+        # W = J R (2x3); Sigma_2d = W Sigma W^T
         w00 = j00 * R[0, 0] + j02 * R[2, 0]
         w01 = j00 * R[0, 1] + j02 * R[2, 1]
         w02 = j00 * R[0, 2] + j02 * R[2, 2]
         w10 = j11 * R[1, 0] + j12 * R[2, 0]
         w11 = j11 * R[1, 1] + j12 * R[2, 1]
         w12 = j11 * R[1, 2] + j12 * R[2, 2]
-        a0 = w00 * m00 + w01 * m10 + w02 * m20
-        a1 = w00 * m01 + w01 * m11 + w02 * m21
-        a2 = w00 * m02 + w01 * m12 + w02 * m22
-        b0 = w10 * m00 + w11 * m10 + w12 * m20
-        b1 = w10 * m01 + w11 * m11 + w12 * m21
-        b2 = w10 * m02 + w11 * m12 + w12 * m22
-        ca = a0 * a0 + a1 * a1 + a2 * a2 + DILATION
-        cb = a0 * b0 + a1 * b1 + a2 * b2
-        cc = b0 * b0 + b1 * b1 + b2 * b2 + DILATION
+        sxx, sxy, sxz, syy, syz, szz = cov3[i, 0], cov3[i, 1], cov3[i, 2], cov3[i, 3], cov3[i, 4], cov3[i, 5]
+        a0 = w00 * sxx + w01 * sxy + w02 * sxz
+        a1 = w00 * sxy + w01 * syy + w02 * syz
+        a2 = w00 * sxz + w01 * syz + w02 * szz
+        b0 = w10 * sxx + w11 * sxy + w12 * sxz
+        b1 = w10 * sxy + w11 * syy + w12 * syz
+        b2 = w10 * sxz + w11 * syz + w12 * szz
+        ca = a0 * w00 + a1 * w01 + a2 * w02 + DILATION
+        cb = a0 * w10 + a1 * w11 + a2 * w12
+        cc = b0 * w10 + b1 * w11 + b2 * w12 + DILATION
         det = ca * cc - cb * cb
         if det <= 0.0:
             continue
@@ -136,7 +152,13 @@ def project_kernel(means: np.ndarray, log_scales: np.ndarray, quats: np.ndarray,
         conic[i, 1] = -cb / det
         conic[i, 2] = ca / det
         depth[i] = z
-        opacity[i] = 1.0 / (1.0 + math.exp(-opacity_logits[i]))
+        opacity[i] = opac[i]
+        visible[i] = True
+        if k == 1:
+            rgb[i, 0] = rgb0[i, 0]
+            rgb[i, 1] = rgb0[i, 1]
+            rgb[i, 2] = rgb0[i, 2]
+            continue
         # colour from SH at the world-frame viewing direction
         r_ = sh[i, 0, 0] * SH_C0
         g_ = sh[i, 0, 1] * SH_C0
@@ -173,60 +195,44 @@ def project_kernel(means: np.ndarray, log_scales: np.ndarray, quats: np.ndarray,
         rgb[i, 0] = max(r_ + 0.5, 0.0)
         rgb[i, 1] = max(g_ + 0.5, 0.0)
         rgb[i, 2] = max(b_ + 0.5, 0.0)
-        visible[i] = True
 
 
 @njit(cache=True)
 def sort_and_bin(visible: np.ndarray, depth: np.ndarray, box: np.ndarray, height: int, band_rows: int,
                  bin_m: float):
-    """Counting sort of the visible Gaussians by depth in ``bin_m`` bins (stable), then per-band lists.
+    """Per-band lists of the visible Gaussians, front to back by depth in ``bin_m`` bins, ties by index.
 
-    Returns (band_start (B+1,) int64, band_list (L,) int32 of Gaussian indices, front to back per band)."""
+    One counting sort keyed by (band, depth bin) over the (Gaussian, band) pairs. Returns (band_start
+    (B+1,) int64, band_list (L,) int32 of Gaussian indices)."""
     n = visible.shape[0]
-    m = 0
     lo = np.inf
     hi = -np.inf
     for i in range(n):
         if visible[i]:
-            m += 1
             lo = min(lo, depth[i])
             hi = max(hi, depth[i])
-    idx = np.empty(m, np.int32)
-    keys = np.empty(m, np.int32)
-    nbins = min(DEPTH_BINS, int((hi - lo) / bin_m) + 1) if m > 0 else 1
+    nbins = min(DEPTH_BINS, int((hi - lo) / bin_m) + 1) if hi >= lo else 1
     scale = 1.0 / bin_m
-    counts = np.zeros(nbins + 1, np.int64)
-    j = 0
+    nbands = (height + band_rows - 1) // band_rows
+    counts = np.zeros(nbands * nbins + 1, np.int64)
     for i in range(n):
         if visible[i]:
-            kk = int((depth[i] - lo) * scale)
-            kk = min(nbins - 1, max(0, kk))
-            idx[j] = i
-            keys[j] = kk
-            counts[kk + 1] += 1
-            j += 1
-    for b in range(nbins):
-        counts[b + 1] += counts[b]
-    order = np.empty(m, np.int32)
-    for j in range(m):
-        kk = keys[j]
-        order[counts[kk]] = idx[j]
-        counts[kk] += 1
-    nbands = (height + band_rows - 1) // band_rows
-    band_start = np.zeros(nbands + 1, np.int64)
-    for j in range(m):
-        g = order[j]
-        for b in range(box[g, 2] // band_rows, box[g, 3] // band_rows + 1):
-            band_start[b + 1] += 1
-    for b in range(nbands):
-        band_start[b + 1] += band_start[b]
-    fill = band_start[:-1].copy()
-    band_list = np.empty(band_start[nbands], np.int32)
-    for j in range(m):
-        g = order[j]
-        for b in range(box[g, 2] // band_rows, box[g, 3] // band_rows + 1):
-            band_list[fill[b]] = g
-            fill[b] += 1
+            kk = min(nbins - 1, max(0, int((depth[i] - lo) * scale)))
+            for b in range(box[i, 2] // band_rows, box[i, 3] // band_rows + 1):
+                counts[b * nbins + kk + 1] += 1
+    for j in range(nbands * nbins):
+        counts[j + 1] += counts[j]
+    band_start = np.empty(nbands + 1, np.int64)
+    for b in range(nbands + 1):
+        band_start[b] = counts[b * nbins]
+    band_list = np.empty(counts[nbands * nbins], np.int32)
+    for i in range(n):
+        if visible[i]:
+            kk = min(nbins - 1, max(0, int((depth[i] - lo) * scale)))
+            for b in range(box[i, 2] // band_rows, box[i, 3] // band_rows + 1):
+                j = b * nbins + kk
+                band_list[counts[j]] = i
+                counts[j] += 1
     return band_start, band_list
 
 
@@ -234,9 +240,10 @@ def sort_and_bin(visible: np.ndarray, depth: np.ndarray, box: np.ndarray, height
 def rasterise_kernel(band_start: np.ndarray, band_list: np.ndarray, uv: np.ndarray, conic: np.ndarray,
                      depth: np.ndarray, rgb: np.ndarray, opacity: np.ndarray, box: np.ndarray,
                      labels: np.ndarray, width: int, height: int, band_rows: int, n_workers: int,
-                     out_rgb: np.ndarray, out_depth: np.ndarray, out_T: np.ndarray, out_label: np.ndarray) -> None:
-    """Composite front to back. Outputs (H,W,3) f64 premultiplied colour, (H,W) f64 sum(w z), (H,W) f64
-    final transmittance, (H,W) uint8 label."""
+                     background: np.ndarray, out_rgb: np.ndarray, out_depth: np.ndarray, out_alpha: np.ndarray,
+                     out_label: np.ndarray) -> None:
+    """Composite front to back. Outputs (H,W,3) uint8 colour over ``background`` (3,), (H,W) f32 expected
+    depth (0 where empty), (H,W) f32 alpha, (H,W) uint8 label."""
     nbands = band_start.shape[0] - 1
     for worker in prange(n_workers):
         T = np.empty((band_rows, width))
@@ -244,6 +251,7 @@ def rasterise_kernel(band_start: np.ndarray, band_list: np.ndarray, uv: np.ndarr
         dep = np.empty((band_rows, width))
         lab = np.empty((band_rows, width), np.uint8)
         done = np.empty((band_rows, width), np.bool_)
+        row_done = np.empty(band_rows, np.int64)
         for b in range(worker, nbands, n_workers):
             r0 = b * band_rows
             r1 = min(height, r0 + band_rows)  # exclusive
@@ -253,6 +261,7 @@ def rasterise_kernel(band_start: np.ndarray, band_list: np.ndarray, uv: np.ndarr
             dep[:] = 0.0
             lab[:] = 0
             done[:] = False
+            row_done[:] = 0
             n_done = 0
             n_pix = nrows * width
             for q in range(band_start[b], band_start[b + 1]):
@@ -270,6 +279,8 @@ def rasterise_kernel(band_start: np.ndarray, band_list: np.ndarray, uv: np.ndarr
                 rb = min(box[g, 3], r1 - 1)
                 for row in range(ra, rb + 1):
                     lr = row - r0
+                    if row_done[lr] == width:
+                        continue
                     dy = row + 0.5 - gv
                     for cj in range(box[g, 0], box[g, 1] + 1):
                         if done[lr, cj]:
@@ -285,6 +296,7 @@ def rasterise_kernel(band_start: np.ndarray, band_list: np.ndarray, uv: np.ndarr
                         nt = tt * (1.0 - alpha)
                         if nt <= T_MIN:
                             done[lr, cj] = True
+                            row_done[lr] += 1
                             n_done += 1
                             continue
                         w = alpha * tt
@@ -299,16 +311,33 @@ def rasterise_kernel(band_start: np.ndarray, band_list: np.ndarray, uv: np.ndarr
                     break
             for lr in range(nrows):
                 for cj in range(width):
-                    out_rgb[r0 + lr, cj, 0] = col[lr, cj, 0]
-                    out_rgb[r0 + lr, cj, 1] = col[lr, cj, 1]
-                    out_rgb[r0 + lr, cj, 2] = col[lr, cj, 2]
-                    out_depth[r0 + lr, cj] = dep[lr, cj]
-                    out_T[r0 + lr, cj] = T[lr, cj]
+                    tt = T[lr, cj]
+                    for c in range(3):
+                        v = round((col[lr, cj, c] + tt * background[c]) * 255.0)
+                        out_rgb[r0 + lr, cj, c] = min(255.0, max(0.0, v))
+                    a = 1.0 - tt
+                    out_alpha[r0 + lr, cj] = a
+                    out_depth[r0 + lr, cj] = dep[lr, cj] / a if a > 1e-6 else 0.0
                     out_label[r0 + lr, cj] = lab[lr, cj]
+
+
+def prepare(cloud) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """View-independent terms of ``cloud`` (cached on the cloud; clouds are treated as immutable)."""
+    key = (id(cloud.log_scales), id(cloud.quats), id(cloud.opacity_logits), id(cloud.sh), len(cloud))
+    cached = getattr(cloud, "_cpu_prepared", None)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    n = len(cloud)
+    out = (np.empty((n, 6), np.float32), np.empty(n, np.float32), np.empty(n, np.float32),
+           np.empty((n, 3), np.float32))
+    prepare_kernel(cloud.log_scales, cloud.quats, cloud.opacity_logits, cloud.sh, *out)
+    cloud._cpu_prepared = (key, out)
+    return out
 
 
 def project(cloud, camera, pose):
     """Stage 1: per-Gaussian screen quantities; returns (uv, conic, depth, rgb, opacity, box, visible)."""
+    cov, reach, opac, rgb0 = prepare(cloud)
     r, t = camera.world_to_camera(pose)
     centre = -r.T @ t
     n = len(cloud)
@@ -320,7 +349,7 @@ def project(cloud, camera, pose):
     box = np.empty((n, 4), np.int32)
     visible = np.empty(n, np.bool_)
     px, py = camera.principal_point
-    project_kernel(cloud.means, cloud.log_scales, cloud.quats, cloud.opacity_logits, cloud.sh, r, t, centre,
+    project_kernel(cloud.means, cov, reach, opac, rgb0, cloud.sh, r, t, centre,
                    camera.fx, camera.fy, px, py, camera.width, camera.height, camera.near, camera.far,
                    uv, conic, depth, rgb, opacity, box, visible)
     return uv, conic, depth, rgb, opacity, box, visible
@@ -330,10 +359,9 @@ def render_cpu(cloud, camera, pose, background=(0.0, 0.0, 0.0)) -> RenderResult:
     h, w = camera.height, camera.width
     uv, conic, depth, rgb, opacity, box, visible = project(cloud, camera, pose)
     band_start, band_list = sort_and_bin(visible, depth, box, h, BAND_ROWS, DEPTH_BIN_M)
-    out_rgb = np.empty((h, w, 3))
-    out_depth = np.empty((h, w))
-    out_T = np.empty((h, w))
-    out_label = np.empty((h, w), np.uint8)
+    res = RenderResult(np.empty((h, w, 3), np.uint8), np.empty((h, w), np.float32), np.empty((h, w), np.float32),
+                       np.empty((h, w), np.uint8))
     rasterise_kernel(band_start, band_list, uv, conic, depth, rgb, opacity, box, cloud.labels, w, h, BAND_ROWS,
-                     max(1, numba.get_num_threads()) * 4, out_rgb, out_depth, out_T, out_label)
-    return finish(out_rgb, out_depth, 1.0 - out_T, out_label, out_T, background)
+                     max(1, numba.get_num_threads()) * 4, np.asarray(background, np.float64), res.rgb, res.depth,
+                     res.alpha, res.label)
+    return res

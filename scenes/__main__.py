@@ -1,0 +1,217 @@
+"""``flowgap-scenes``: build, render, inspect and preview scenes.
+
+    flowgap-scenes build --suite                 # all 16 suite scenes into cache/scenes/ (skips up-to-date)
+    flowgap-scenes build window3_stone my.json   # named scenes or spec files
+    flowgap-scenes render window1_brick --pose 1.0 0.2 -1.5 --rpy 0 0 5 -o frame.png
+    flowgap-scenes info cache/scenes/window1_brick.ply
+    flowgap-scenes montage -o docs/images/suite_montage.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from scenes.spec import SpecError
+from scenes.splats import LABEL_NAMES, PlyError
+
+log = logging.getLogger("scenes")
+
+LABEL_COLOURS = np.array([[0, 0, 0], [180, 80, 60], [230, 200, 40], [60, 160, 230], [110, 110, 110]], np.uint8)
+
+
+def _camera(args):
+    from scenes.camera import PinholeCamera
+
+    return PinholeCamera(args.width, args.height, math.radians(args.vfov_deg))
+
+
+def _pose(args):
+    from scenes.camera import Pose, euler_to_quat
+
+    roll, pitch, yaw = (math.radians(v) for v in args.rpy)
+    return Pose(tuple(args.pose), euler_to_quat(roll, pitch, yaw))
+
+
+def _depth_vis(depth: np.ndarray) -> np.ndarray:
+    valid = depth > 0
+    out = np.zeros(depth.shape + (3,), np.uint8)
+    if valid.any():
+        lo, hi = np.percentile(depth[valid], [1, 99])
+        norm = np.clip((depth - lo) / max(hi - lo, 1e-6), 0, 1)
+        col = cv2.applyColorMap((255 * (1 - norm)).astype(np.uint8), cv2.COLORMAP_TURBO)[..., ::-1]
+        out[valid] = col[valid]
+    return out
+
+
+def cmd_build(args) -> int:
+    from tqdm import tqdm
+
+    from scenes.build import build_cached, resolve_spec
+    from scenes.library import SUITE
+    from scenes.splats import read_ply_header
+
+    names = list(args.scenes) + (SUITE if args.suite else [])
+    if not names:
+        print("flowgap-scenes build: name at least one scene or pass --suite", file=sys.stderr)
+        return 2
+    specs = [resolve_spec(n) for n in names]
+    bar = tqdm(specs, desc="scenes", unit="scene", disable=len(specs) < 2 or args.quiet, leave=False)
+    for spec in bar:
+        t0 = time.perf_counter()
+        path, built = build_cached(spec, args.cache_dir, force=args.force)
+        n = read_ply_header(path)[0]
+        state = f"built in {time.perf_counter() - t0:.1f} s" if built else "up to date"
+        tqdm.write(f"{spec.name}: {n:,} Gaussians, {state} -> {path}")
+    return 0
+
+
+def cmd_render(args) -> int:
+    from scenes.build import load_scene
+    from scenes.render import render_splats
+
+    _, cloud = load_scene(args.scene, args.cache_dir)
+    cam, pose = _camera(args), _pose(args)
+    t0 = time.perf_counter()
+    res = render_splats(cloud, cam, pose, backend=args.backend)
+    ms = 1e3 * (time.perf_counter() - t0)
+    panel = np.concatenate([res.rgb, _depth_vis(res.depth), LABEL_COLOURS[np.minimum(res.label, 4)]], 1)
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(out), panel[..., ::-1]):
+        raise OSError(f"could not write {out}")
+    valid = res.depth > 0
+    drange = f"{res.depth[valid].min():.2f}-{res.depth[valid].max():.2f} m" if valid.any() else "none"
+    counts = ", ".join(f"{LABEL_NAMES[k].split(' ')[0]} {100 * (res.label == k).mean():.1f}%"
+                       for k in range(5) if (res.label == k).any())
+    print(f"{out}: RGB | depth | label, {cam.width}x{cam.height}, {args.backend} {ms:.0f} ms "
+          f"(first call includes JIT), depth {drange}; {counts}")
+    return 0
+
+
+def cmd_info(args) -> int:
+    from scenes.splats import read_ply
+
+    cloud = read_ply(args.ply)
+    lo, hi = cloud.bounds()
+    print(f"{args.ply}: {len(cloud):,} Gaussians, SH degree {cloud.sh_degree}")
+    print(f"bounds  x [{lo[0]:.3f}, {hi[0]:.3f}]  y [{lo[1]:.3f}, {hi[1]:.3f}]  z [{lo[2]:.3f}, {hi[2]:.3f}] m")
+    if cloud.labels.any():
+        counts = np.bincount(cloud.labels, minlength=5)
+        print("labels  " + ", ".join(f"{LABEL_NAMES.get(k, k)}: {c:,}" for k, c in enumerate(counts) if c))
+    return 0
+
+
+def cmd_montage(args) -> int:
+    from tqdm import tqdm
+
+    from scenes.build import load_scene
+    from scenes.camera import START_POSE
+    from scenes.library import SUITE
+    from scenes.render import render_splats
+
+    cam = _camera(args)
+    tiles = []
+    for name in tqdm(SUITE, desc="montage", unit="scene", disable=args.quiet, leave=False):
+        _, cloud = load_scene(name, args.cache_dir)
+        img = render_splats(cloud, cam, START_POSE).rgb.copy()
+        cv2.putText(img, name, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 2, cv2.LINE_AA)
+        cv2.putText(img, name, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
+        tiles.append(img)
+    rows = [np.concatenate(tiles[i:i + 4], 1) for i in range(0, 16, 4)]
+    grid = np.concatenate(rows, 0)
+    out = Path(args.output)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(out), grid[..., ::-1], [cv2.IMWRITE_PNG_COMPRESSION, 9]):
+        raise OSError(f"could not write {out}")
+    print(f"{out}: {len(SUITE)} suite scenes from the start pose, {grid.shape[1]}x{grid.shape[0]}, "
+          f"{out.stat().st_size / 1e3:.0f} kB")
+    return 0
+
+
+def _add_camera_args(p: argparse.ArgumentParser, width: int = 320, height: int = 240) -> None:
+    p.add_argument("--width", type=int, default=width, help="image width in pixels (default %(default)s)")
+    p.add_argument("--height", type=int, default=height, help="image height in pixels (default %(default)s)")
+    p.add_argument("--vfov-deg", type=float, default=75.0, help="vertical field of view (default %(default)s)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="flowgap-scenes",
+        description="Build, render and inspect flowgap's Gaussian-splat scenes (NED world; the vehicle starts "
+                    "at (0, 0, -1.5) looking along +x at a wall with an opening).",
+        epilog="Scenes are suite names (window1..4 x brick/granite/newspaper/stone, e.g. window1_brick), spec "
+               ".json files, or (render) 3DGS .ply files.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    from scenes.build import default_cache_dir
+
+    def cache_arg(p):
+        p.add_argument("--cache-dir", type=Path, default=None,
+                       help=f"scene cache directory (default {default_cache_dir()}, or $FLOWGAP_SCENE_CACHE)")
+
+    p = sub.add_parser("build", help="build scenes into the cache (skips those up to date)",
+                       description="Generate scenes' splats (.ply + labels + spec .json) into the cache. The cache "
+                                   "key is the spec JSON plus the generator code, so changed scenes rebuild.")
+    p.add_argument("scenes", nargs="*", help="suite names or spec .json paths")
+    p.add_argument("--suite", action="store_true", help="build all 16 suite scenes")
+    p.add_argument("--force", action="store_true", help="rebuild even if up to date")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    cache_arg(p)
+    p.set_defaults(func=cmd_build)
+
+    p = sub.add_parser("render", help="render a scene at a pose to a PNG (RGB | depth | label)",
+                       description="Render one view and write RGB, depth (turbo colour map, near = red) and the "
+                                   "label image (wall red, frame yellow, beyond-the-wall blue, floor grey) side by "
+                                   "side.")
+    p.add_argument("scene", help="suite name, spec .json or 3DGS .ply")
+    p.add_argument("--pose", type=float, nargs=3, default=(0.0, 0.0, -1.5), metavar=("X", "Y", "Z"),
+                   help="NED body position in metres (default: the start pose 0 0 -1.5)")
+    p.add_argument("--rpy", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("ROLL", "PITCH", "YAW"),
+                   help="body attitude in degrees (default level, facing north)")
+    p.add_argument("--backend", choices=("cpu", "torch", "reference"), default="cpu", help="renderer")
+    p.add_argument("-o", "--output", default="render.png", help="output PNG (default %(default)s)")
+    _add_camera_args(p)
+    cache_arg(p)
+    p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("info", help="Gaussian count, SH degree and bounds of a .ply",
+                       description="Read a 3DGS .ply (ours, the reference trainer's, nerfstudio's) and summarise it.")
+    p.add_argument("ply", type=Path, help="path to a .ply")
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("montage", help="all 16 suite scenes from the start pose in one PNG",
+                       description="Render every suite scene from the start pose into a 4x4 grid.")
+    p.add_argument("-o", "--output", default="suite_montage.png", help="output PNG (default %(default)s)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_camera_args(p, 200, 150)
+    cache_arg(p)
+    p.set_defaults(func=cmd_montage)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return args.func(args)
+    except (SpecError, PlyError) as exc:
+        print(f"flowgap-scenes: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"flowgap-scenes: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
