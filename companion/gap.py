@@ -7,11 +7,12 @@ Two detectors share one result type, :class:`GapDetection`:
   external contours → keep 0.001·HW ≤ area ≤ 0.9·HW → largest → centroid from moments → filled mask.
 - :func:`detect_gap_parallax` is ours: it works on the flow *vectors*, not on colour grey levels that
   depend on flow direction.  For a camera that translates (no rotation), the flow at a pixel is
-  ``F = ρ·g(x, y; t)`` with ρ = 1/Z the inverse depth and g known from the intrinsics and the translation
-  direction t (estimated from the flow by least squares when not given).  ρ = F·g/|g|² is computed where
-  |g| is large enough (away from the focus of expansion), filled elsewhere, smoothed, and Otsu-thresholded:
-  the far (low-ρ) region seen through the opening is the gap.  The largest far connected component that is
-  inside the size bounds, with holes filled, is the mask.
+  ``F = ρ·g(x, y; t)`` with ρ = |T|/Z the inverse depth (in units of the step length) and g known from the
+  intrinsics and the translation direction t (estimated from the flow by least squares when not given).
+  ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion) and away from the
+  image border, inpainted elsewhere, and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
+  (floor, wall); the far class of the sharpest significant depth step is what lies beyond the opening.  The
+  largest far component inside the size bounds and enclosed by a nearer surface is the mask.
 
 Both take an H×W×2 float flow (u right, v down, pixels) and return a frozen :class:`GapDetection`.
 """
