@@ -122,7 +122,7 @@ def cmd_montage(args) -> int:
     for name in tqdm(SUITE, desc="montage", unit="scene", disable=args.quiet, leave=False):
         _, cloud = load_scene(name, args.cache_dir)
         img = render_splats(cloud, cam, START_POSE).rgb.copy()
-        cv2.putText(img, name, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 2, cv2.LINE_AA)
+        cv2.putText(img, name, (5, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (0, 0, 0), 1, cv2.LINE_AA)
         cv2.putText(img, name, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
         tiles.append(img)
     rows = [np.concatenate(tiles[i:i + 4], 1) for i in range(0, 16, 4)]
