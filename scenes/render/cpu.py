@@ -32,6 +32,11 @@ from scenes.render.common import (
 )
 
 BAND_ROWS = 8
+# The kernels bake these constants in at compile time, and numba's on-disk cache is keyed on this file
+# only: if any of them changes in render.common, this assertion fails until this line is updated too
+# (which also invalidates the cache).
+assert (ALPHA_MAX, ALPHA_MIN, T_MIN, DILATION, SIGMA_EXTENT, JACOBIAN_CLAMP, LABEL_T, DEPTH_BINS) == (
+    0.99, 1.0 / 255.0, 1e-4, 0.3, 3.0, 1.3, 0.5, 1 << 20), "render.common constants changed: update cpu.py"
 _C2 = np.array(SH_C2)
 _C3 = np.array(SH_C3)
 

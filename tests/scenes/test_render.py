@@ -114,3 +114,20 @@ def test_cpu_matches_reference_with_sh3():
 def test_unknown_backend(brick_cloud):
     with pytest.raises(ValueError, match="unknown render backend"):
         render_splats(brick_cloud, PinholeCamera(8, 6), START_POSE, backend="vulkan")
+
+
+def test_frame_label_and_random_scenes(light_spec):
+    from scenes.library import random_scene
+    from scenes.spec import OpeningSpec
+
+    framed = dataclasses.replace(light_spec, openings=(OpeningSpec("rect", (0.0, -1.5), (0.9, 0.9),
+                                                                   frame_width=0.08),))
+    res = render_splats(build_scene(framed), PinholeCamera(96, 72), START_POSE)
+    assert (res.label == 2).any() and (res.label == LABEL_BACKGROUND).any()
+    rng = np.random.default_rng(3)
+    for _ in range(2):
+        spec = dataclasses.replace(random_scene(rng), density=light_spec.density)
+        cloud = build_scene(spec)
+        res = render_splats(cloud, PinholeCamera(96, 72), START_POSE)
+        assert (res.label == LABEL_BACKGROUND).mean() > 0.005   # the opening is in view from the start
+        assert (res.label == LABEL_WALL).mean() > 0.3
