@@ -139,7 +139,8 @@ def _labels_path(path: Path) -> Path:
 
 
 def read_ply_header(path: str | Path) -> tuple[int, list[tuple[str, str]], int, list[tuple[str, int, int]]]:
-    """Parse a ply header: (vertex count, [(name, dtype)], byte offset of data, other elements)."""
+    """Parse a ply header: (vertex count, [(name, dtype)], byte offset of the vertex data, other elements
+    as (name, count, row bytes, before vertex))."""
     path = Path(path)
     try:
         f = open(path, "rb")
@@ -151,7 +152,7 @@ def read_ply_header(path: str | Path) -> tuple[int, list[tuple[str, str]], int, 
             raise PlyError(f"{path}: not a PLY file (no 'ply' magic); pass a Gaussian-splat .ply")
         props: list[tuple[str, str]] = []
         n_vertex = -1
-        elements: list[tuple[str, int, int]] = []  # (name, count, row bytes) of elements after vertex
+        elements: list[list] = []  # [name, count, row bytes, before vertex, has list property]
         current = None
         fmt_ok = False
         for _ in range(10000):
@@ -178,18 +179,20 @@ def read_ply_header(path: str | Path) -> tuple[int, list[tuple[str, str]], int, 
                 if current == "vertex":
                     n_vertex = int(parts[2])
                 else:
-                    elements.append((current, int(parts[2]), 0))
+                    elements.append([current, int(parts[2]), 0, n_vertex < 0, False])
             elif parts[0] == "property":
                 if len(parts) >= 2 and parts[1] == "list":
-                    raise PlyError(f"{path}: list property in element {current!r} is not supported; export "
-                                   f"Gaussians only (no faces)")
+                    if current == "vertex" or not elements:
+                        raise PlyError(f"{path}: list property in element {current!r} is not supported; export "
+                                       f"Gaussians only (no faces)")
+                    elements[-1][4] = True
+                    continue
                 if len(parts) != 3 or parts[1] not in _PLY_TYPES:
                     raise PlyError(f"{path}: malformed property line {line!r}; re-export the file")
                 if current == "vertex":
                     props.append((parts[2], "<" + _PLY_TYPES[parts[1]]))
                 elif elements:
-                    name, cnt, size = elements[-1]
-                    elements[-1] = (name, cnt, size + int(_PLY_TYPES[parts[1]][1]))
+                    elements[-1][2] += int(_PLY_TYPES[parts[1]][1])
             elif parts[0] == "end_header":
                 break
             else:
@@ -200,7 +203,14 @@ def read_ply_header(path: str | Path) -> tuple[int, list[tuple[str, str]], int, 
             raise PlyError(f"{path}: no 'format' line in the header; re-export the file")
         if n_vertex < 0:
             raise PlyError(f"{path}: no 'element vertex' in the header; pass a Gaussian-splat .ply")
-        return n_vertex, props, f.tell(), elements
+        offset = f.tell()
+        for name, count, size, before, has_list in elements:
+            if before:
+                if has_list:
+                    raise PlyError(f"{path}: element {name!r} before the vertices has a list property; this "
+                                   f"layout is not supported (re-export as a plain 3DGS .ply)")
+                offset += count * size
+        return n_vertex, props, offset, [tuple(e[:4]) for e in elements]
 
 
 def read_ply(path: str | Path) -> GaussianCloud:

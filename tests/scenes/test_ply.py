@@ -59,6 +59,18 @@ def test_double_properties_and_extra_elements(tmp_path):
     assert c.means[:, 0].tolist() == [1.5, 2.5] and c.labels.tolist() == [1, 3] and c.sh_degree == 0
 
 
+def test_element_before_vertex_is_skipped(tmp_path):
+    props = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2", "rot_0",
+             "rot_1", "rot_2", "rot_3"]
+    header = "ply\nformat binary_little_endian 1.0\nelement chunk 2\nproperty float a\nproperty uint b\n"
+    header += "element vertex 1\n" + "".join(f"property float {p}\n" for p in props)
+    header += "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    vert = np.arange(len(props), dtype="<f4")
+    (tmp_path / "c.ply").write_bytes(header.encode() + bytes(16) + vert.tobytes() + bytes(13))
+    c = read_ply(tmp_path / "c.ply")
+    assert c.means.tolist() == [[0.0, 1.0, 2.0]] and c.quats.tolist() == [[10.0, 11.0, 12.0, 13.0]]
+
+
 def _one_line(exc: PlyError) -> str:
     msg = str(exc)
     assert "\n" not in msg
