@@ -13,7 +13,8 @@ Stable interfaces (other packages rely on these):
 * ``scenes.load_scene(name_or_path) -> (SceneSpec, GaussianCloud)`` -- builds and caches on demand
   under ``cache/scenes/`` (override with ``$FLOWGAP_SCENE_CACHE``).
 * ``scenes.random_scene(rng: numpy.random.Generator) -> SceneSpec`` -- random training/Monte-Carlo
-  scene; pass it to ``load_scene`` or ``scenes.build.build_scene``.
+  scene; ``scenes.build.build_scene(spec) -> GaussianCloud`` builds it in memory (~0.2 s, no disk),
+  ``load_scene(spec)`` also caches it on disk (~15 MB).
 * ``scenes.camera.PinholeCamera(width=320, height=240, vfov_rad=radians(75), mount=CameraMount())``,
   ``scenes.camera.Pose(position, quat_wxyz)``, ``camera.world_to_camera(pose) -> (R, t)``,
   ``camera.project(points, pose)``.
@@ -21,7 +22,9 @@ Stable interfaces (other packages rely on these):
   -> RenderResult(rgb HxWx3 uint8, depth HxW float32, alpha HxW float32, label HxW uint8)``.
   Labels: 0 none, 1 wall, 2 frame, 3 background (anything beyond the wall), 4 floor in front of it.
 * ``scenes.groundtruth.gap_mask(cloud, camera, pose) -> HxW bool``,
-  ``scenes.groundtruth.flow_between(cloud, camera, pose1, pose2) -> (flow HxWx2 float32, valid HxW bool)``.
+  ``scenes.groundtruth.flow_between(cloud, camera, pose1, pose2) -> (flow HxWx2 float32, valid HxW bool)``
+  (forward flow 1 -> 2, occlusion-checked; pass ``renders=(r1, r2)`` to reuse renders),
+  ``scenes.groundtruth.sample_pose_pair(spec, rng) -> (Pose, Pose)`` for random training pairs.
 * ``scenes.collision.load_collision(name_or_path) -> SceneCollision`` with ``.clearance((x, y, z))``
   (metres to the nearest solid, negative inside; wall slab minus openings, frames; not the floor) and
   ``.wall_x`` (front face).

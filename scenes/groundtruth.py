@@ -14,13 +14,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from scenes.camera import PinholeCamera, Pose
+from scenes.camera import PinholeCamera, Pose, euler_to_quat
 from scenes.collision import SceneCollision, load_collision
 from scenes.render import RenderResult, render_splats
+from scenes.spec import SceneSpec
 from scenes.splats import LABEL_BACKGROUND, GaussianCloud
 
 __all__ = ["gap_mask", "gap_mask_from_labels", "flow_between", "flow_from_depth", "warp_backward",
-           "load_collision", "SceneCollision"]
+           "sample_pose_pair", "load_collision", "SceneCollision"]
 
 
 def gap_mask_from_labels(label: np.ndarray) -> np.ndarray:
@@ -86,3 +87,25 @@ def warp_backward(image2: np.ndarray, flow: np.ndarray) -> np.ndarray:
     jj, ii = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     return cv2.remap(image2, jj + flow[..., 0], ii + flow[..., 1], cv2.INTER_LINEAR,
                      borderMode=cv2.BORDER_REPLICATE)
+
+
+def sample_pose_pair(spec: SceneSpec, rng: np.random.Generator, max_step: float = 0.15,
+                     max_turn_rad: float = 0.05) -> tuple[Pose, Pose]:
+    """Two nearby NED body poses in front of the wall, roughly facing its opening (for flow training).
+
+    The first pose is 0.6 m to 2.6 m before the wall's front face, within about a metre of the opening's
+    centre; the second is displaced by up to ``max_step`` metres per axis and rotated by up to
+    ``max_turn_rad`` per axis. All draws come from ``rng``."""
+    poly = np.array(spec.openings[0].polygon()) if spec.openings else np.array([[0.0, -1.5]])
+    cy, cz = poly.mean(0)
+    x = spec.wall_x - rng.uniform(0.6, min(2.6, spec.wall_x + 0.5))
+    y = cy + rng.uniform(-1.0, 1.0)
+    z = float(np.clip(cz + rng.uniform(-0.5, 0.5), -3.0, -0.5))
+    yaw = np.arctan2(cy - y, spec.wall_x - x) * rng.uniform(0.3, 1.0)
+    att = (rng.uniform(-0.08, 0.08), rng.uniform(-0.08, 0.08), yaw)
+    p1 = Pose((float(x), float(y), z), euler_to_quat(*att))
+    step = rng.uniform(-max_step, max_step, 3) * np.array([1.0, 0.6, 0.4])
+    step[0] = abs(step[0])  # mostly forward, as in flight
+    att2 = np.asarray(att) + rng.uniform(-max_turn_rad, max_turn_rad, 3)
+    p2 = Pose((float(x + step[0]), float(y + step[1]), float(z + step[2])), euler_to_quat(*att2))
+    return p1, p2

@@ -9,8 +9,6 @@ transmittance stays above 1e-4. Rows are processed in chunks to bound memory.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 
@@ -181,23 +179,35 @@ def rasterise_torch(p: dict, labels: torch.Tensor, width: int, height: int, back
     return col.view(height, width, 3), dep.view(height, width), acc.view(height, width), lab.view(height, width)
 
 
+def cloud_tensors(cloud, dev: torch.device) -> tuple[torch.Tensor, ...]:
+    """(means, log_scales, quats, opacity_logits, sh, labels) on ``dev``, cached on the cloud per device so
+    that repeated renders do not copy the cloud to the GPU every frame (clouds are treated as immutable)."""
+    key = (id(cloud.means), id(cloud.log_scales), id(cloud.quats), id(cloud.opacity_logits), id(cloud.sh),
+           id(cloud.labels), len(cloud), str(dev))
+    cache = getattr(cloud, "_torch_tensors", None)
+    if cache is not None and cache[0] == key:
+        return cache[1]
+    f32 = {"dtype": torch.float32, "device": dev}
+    out = tuple(torch.as_tensor(a, **f32) for a in (cloud.means, cloud.log_scales, cloud.quats,
+                                                      cloud.opacity_logits, cloud.sh))
+    out = out + (torch.as_tensor(cloud.labels, device=dev),)
+    cloud._torch_tensors = (key, out)
+    return out
+
+
 def render_torch(cloud, camera, pose, background=(0.0, 0.0, 0.0), device: str | None = None) -> RenderResult:
     dev = torch.device(device) if device else _default_device()
     r, t = camera.world_to_camera(pose)
     centre = -r.T @ t
     f32 = {"dtype": torch.float32, "device": dev}
-    p = project_torch(torch.as_tensor(cloud.means, **f32), torch.as_tensor(cloud.log_scales, **f32),
-                      torch.as_tensor(cloud.quats, **f32), torch.as_tensor(cloud.opacity_logits, **f32),
-                      torch.as_tensor(cloud.sh, **f32), torch.as_tensor(r, **f32), torch.as_tensor(t, **f32),
-                      torch.as_tensor(centre, **f32), camera)
+    means, log_scales, quats, opacity_logits, sh, labels = cloud_tensors(cloud, dev)
+    p = project_torch(means, log_scales, quats, opacity_logits, sh, torch.as_tensor(r, **f32),
+                      torch.as_tensor(t, **f32), torch.as_tensor(centre, **f32), camera)
     order = sort_torch(p["depth"])
     p = {k: v[order] for k, v in p.items()}
-    labels = torch.as_tensor(cloud.labels, device=dev)
     col, dep, acc, lab = rasterise_torch(p, labels, camera.width, camera.height, background)
     rgb8 = torch.clamp(torch.round(col * 255.0), 0, 255).to(torch.uint8)
     depth = torch.where(acc > 1e-6, dep / torch.clamp(acc, min=1e-12), torch.zeros_like(dep))
     return RenderResult(rgb8.cpu().numpy(), depth.float().cpu().numpy(), acc.float().cpu().numpy(),
                         lab.cpu().numpy().astype(np.uint8))
 
-
-_ = math  # keep import for type-checkers of older versions

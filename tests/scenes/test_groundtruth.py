@@ -56,3 +56,17 @@ def test_gap_mask_matches_projected_opening(brick_cloud, brick_spec):
         inner = cv2.erode(expected.astype(np.uint8), k, iterations=2).astype(bool)
         outer = cv2.dilate(expected.astype(np.uint8), k, iterations=1).astype(bool)
         assert mask[inner].all() and not mask[~outer].any()
+
+
+def test_sample_pose_pair(brick_cloud, brick_spec):
+    from scenes.groundtruth import sample_pose_pair
+
+    rng = np.random.default_rng(0)
+    cam = PinholeCamera(96, 72)
+    a = sample_pose_pair(brick_spec, np.random.default_rng(4))
+    assert a == sample_pose_pair(brick_spec, np.random.default_rng(4))
+    for _ in range(3):
+        p1, p2 = sample_pose_pair(brick_spec, rng)
+        assert p1.position[0] < brick_spec.wall_x - 0.5 and p2.position[0] >= p1.position[0]
+        flow, valid = flow_between(brick_cloud, cam, p1, p2)
+        assert valid.mean() > 0.5
