@@ -220,8 +220,11 @@ def read_ply(path: str | Path) -> GaussianCloud:
     names = [p for p, _ in props]
     if len(set(names)) != len(names):
         raise PlyError(f"{path}: duplicate vertex property names; re-export the file")
-    required = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
-                "rot_0", "rot_1", "rot_2", "rot_3"]
+    # nerfstudio writes degree-0 splats with uchar red/green/blue instead of f_dc_*
+    rgb_colours = "f_dc_0" not in names and all(c in names for c in ("red", "green", "blue"))
+    required = ["x", "y", "z", "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    if not rgb_colours:
+        required[3:3] = ["f_dc_0", "f_dc_1", "f_dc_2"]
     missing = [r for r in required if r not in names]
     if missing:
         raise PlyError(f"{path}: vertex lacks Gaussian properties {missing[:4]}; this is not a 3DGS splat "
@@ -250,7 +253,11 @@ def read_ply(path: str | Path) -> GaussianCloud:
 
     k = n_rest // 3 + 1
     sh = np.zeros((n, k, 3), np.float32)
-    sh[:, 0, :] = cols(["f_dc_0", "f_dc_1", "f_dc_2"])
+    if rgb_colours:
+        scale = 255.0 if np.issubdtype(v["red"].dtype, np.integer) else 1.0
+        sh[:, 0, :] = rgb_to_sh0(cols(["red", "green", "blue"]) / scale)
+    else:
+        sh[:, 0, :] = cols(["f_dc_0", "f_dc_1", "f_dc_2"])
     if n_rest:
         sh[:, 1:, :] = cols(rest_names).reshape(n, 3, k - 1).transpose(0, 2, 1)
     labels = None

@@ -71,6 +71,23 @@ def test_element_before_vertex_is_skipped(tmp_path):
     assert c.means.tolist() == [[0.0, 1.0, 2.0]] and c.quats.tolist() == [[10.0, 11.0, 12.0, 13.0]]
 
 
+def test_nerfstudio_degree0_rgb_colours(tmp_path):
+    """nerfstudio's exporter writes degree-0 splats with uchar red/green/blue instead of f_dc_*."""
+    floats = ["x", "y", "z", "nx", "ny", "nz", "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1",
+              "rot_2", "rot_3"]
+    header = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
+    header += "".join(f"property float {p}\n" for p in floats[:6])
+    header += "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+    header += "".join(f"property float {p}\n" for p in floats[6:]) + "end_header\n"
+    rec = np.zeros(1, dtype=[(p, "<f4") for p in floats[:6]] + [(c, "u1") for c in ("red", "green", "blue")]
+                   + [(p, "<f4") for p in floats[6:]])
+    rec["red"], rec["green"], rec["blue"], rec["rot_0"] = 255, 0, 51, 1.0
+    (tmp_path / "n.ply").write_bytes(header.encode() + rec.tobytes())
+    c = read_ply(tmp_path / "n.ply")
+    assert c.sh_degree == 0
+    assert (c.sh[0, 0] * 0.28209479177387814 + 0.5) == pytest.approx([1.0, 0.0, 0.2], abs=1e-6)
+
+
 def _one_line(exc: PlyError) -> str:
     msg = str(exc)
     assert "\n" not in msg
