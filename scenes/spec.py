@@ -135,10 +135,17 @@ class SceneSpec:
                 raise SpecError(f"unknown texture {tex!r}; use one of {TEXTURES}")
         if self.wall.thickness <= 0 or self.wall.width <= 0 or self.wall.height <= 0:
             raise SpecError("wall width, height and thickness must be positive; fix the 'wall' block")
-        for op in self.openings:
+        y_lo, y_hi = self.wall.center_y - self.wall.width / 2, self.wall.center_y + self.wall.width / 2
+        for i, op in enumerate(self.openings):
             poly = op.polygon()
             if len(poly) < 3:
-                raise SpecError("an opening polygon needs at least 3 vertices; fix 'openings'")
+                raise SpecError(f"opening {i} has fewer than 3 vertices; fix 'openings'")
+            if op.frame_width < 0 or op.frame_depth < 0:
+                raise SpecError(f"opening {i} has a negative frame width or depth; fix 'openings'")
+            ys, zs = [p[0] for p in poly], [p[1] for p in poly]
+            if min(ys) < y_lo or max(ys) > y_hi or min(zs) < -self.wall.height or max(zs) > 0:
+                raise SpecError(f"opening {i} extends beyond the wall (y {min(ys):.2f}..{max(ys):.2f}, z "
+                                f"{min(zs):.2f}..{max(zs):.2f}); move or shrink it")
         return self
 
     # --- JSON -------------------------------------------------------------------------------------

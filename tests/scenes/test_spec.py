@@ -33,6 +33,8 @@ def test_bad_specs_raise_one_line_errors():
         SceneSpec.from_json('{"wall": {"texture": "marble"}}')
     with pytest.raises(SpecError, match="unknown scene"):
         resolve_spec("window9_brick")
+    with pytest.raises(SpecError, match="beyond the wall"):
+        SceneSpec.from_json('{"openings": [{"shape": "rect", "center": [0, -3.9], "size": [1, 1]}]}')
 
 
 @pytest.mark.parametrize("name", SUITE)
