@@ -73,7 +73,6 @@ def random_opening(rng: np.random.Generator) -> OpeningSpec:
     if kind == "ellipse":
         return OpeningSpec("ellipse", center=(cy, cz), size=(w, h), frame_width=frame)
     n = int(rng.integers(5, 9))
-    ang = np.sort(rng.uniform(0, 2 * np.pi, n)) if n > 0 else np.zeros(0)
     ang = np.linspace(0, 2 * np.pi, n, endpoint=False) + rng.uniform(-0.25, 0.25, n)
     rad = rng.uniform(0.85, 1.0, n)
     verts = tuple((cy + w / 2 * r * np.cos(a), cz + h / 2 * r * np.sin(a)) for a, r in zip(ang, rad, strict=True))

@@ -66,3 +66,15 @@ def test_background_scale_matches_apparent_size():
     assert dataclasses.replace(spec, version=99) != spec
     with pytest.raises(SpecError, match="version"):
         dataclasses.replace(spec, version=99).validate()
+
+
+def test_random_openings_fit_the_vehicle():
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        spec = random_scene(rng)
+        col = SceneCollision(spec)
+        poly = np.array(spec.openings[0].polygon())
+        ys, zs = np.meshgrid(np.linspace(poly[:, 0].min(), poly[:, 0].max(), 25),
+                             np.linspace(poly[:, 1].min(), poly[:, 1].max(), 25))
+        x_mid = spec.wall_x + spec.wall.thickness / 2
+        assert max(col.clearance((x_mid, y, z)) for y, z in zip(ys.ravel(), zs.ravel(), strict=True)) > 0.25
