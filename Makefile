@@ -17,7 +17,8 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 demo: $(STAMP)
-	$(BIN)/python -m tools.demo
+	$(BIN)/python -m scenes build window1_brick
+	$(BIN)/python -m tools.launch --scene window1_brick --result runs/demo-verdict.json
 
 bench: $(STAMP)
 	$(BIN)/python -m tools.bench

@@ -62,6 +62,45 @@ class CentroidFilter:
         return self._used
 
 
+class ConfirmingCentroidFilter(CentroidFilter):
+    """The τ_c rule with two safeguards of ours: a first centroid is only used once a second detection within
+    τ_c confirms it (one false detection must not become the reference everything else is compared with),
+    and when ``reacquire_after`` consecutive fresh detections agree with each other but not with the used
+    centroid, the used one is stale and the newest agreeing detection replaces it."""
+
+    def __init__(self, config: TrackingConfig = TrackingConfig(), reacquire_after: int = 2) -> None:
+        super().__init__(config)
+        self.reacquire_after = reacquire_after
+        self._candidates: list[Centroid] = []
+
+    def reset(self) -> None:
+        super().reset()
+        self._candidates = []
+
+    def update(self, c_k: Centroid | None) -> Centroid | None:
+        if c_k is not None and not (math.isfinite(c_k[0]) and math.isfinite(c_k[1])):
+            c_k = None
+        if c_k is None:
+            self.last_accepted = False
+            return self._used
+        c_k = (float(c_k[0]), float(c_k[1]))
+        if self._used is not None and math.dist(c_k, self._used) <= self.config.tau_c_px:
+            self._candidates = []
+            self._used, self.last_accepted = c_k, True
+            return self._used
+        # Not consistent with the used centroid (or none yet): collect agreeing candidates.
+        if self._candidates and math.dist(c_k, self._candidates[-1]) > self.config.tau_c_px:
+            self._candidates = []
+        self._candidates.append(c_k)
+        needed = 2 if self._used is None else self.reacquire_after
+        if len(self._candidates) >= needed:
+            self._used, self.last_accepted = c_k, True
+            self._candidates = []
+        else:
+            self.last_accepted = False
+        return self._used
+
+
 @dataclass(frozen=True)
 class KalmanConfig:
     tau_c_px: float = 80.0

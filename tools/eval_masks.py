@@ -28,6 +28,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from companion.flow.registry import parse_backend
+
 log = logging.getLogger("flowgap.eval_masks")
 
 DEFAULT_BACKENDS = ("dis:fast", "dis:medium", "dis:fine", "farneback", "groundtruth", "raft")
@@ -71,18 +73,6 @@ def gt_mask(cloud, camera, pose, render=None) -> np.ndarray:
 # ------------------------------------------------------------------------------------------------------------
 # backends and detectors
 # ------------------------------------------------------------------------------------------------------------
-
-def parse_backend(spec: str) -> tuple[str, dict]:
-    """'dis:fast' -> ('dis', {'preset': 'fast'}); 'raft' -> ('raft', {}); 'raft:large' -> variant."""
-    name, _, arg = spec.partition(":")
-    if not arg:
-        return name, {}
-    if name == "dis":
-        return name, {"preset": arg}
-    if name == "raft":
-        return name, {"variant": arg}
-    raise ValueError(f"backend {spec!r}: only dis:<preset> and raft:<variant> take an argument")
-
 
 def build_backends(specs, raft_weights, raft_iters: int, threads: int):
     from companion.flow import FlowError, make_flow_backend

@@ -48,3 +48,15 @@ def _factory(name: str) -> Callable[..., FlowBackend]:
 def make_flow_backend(name: str, **options) -> FlowBackend:
     """Build the backend registered as ``name`` with its keyword ``options``."""
     return _factory(name)(**options)
+
+
+def parse_backend(spec: str) -> tuple[str, dict]:
+    """'dis:fast' -> ('dis', {'preset': 'fast'}); 'raft' -> ('raft', {}); 'raft:large' -> variant."""
+    name, _, arg = spec.partition(":")
+    if not arg:
+        return name, {}
+    if name == "dis":
+        return name, {"preset": arg}
+    if name == "raft":
+        return name, {"variant": arg}
+    raise ValueError(f"backend {spec!r}: only dis:<preset> and raft:<variant> take an argument")

@@ -1,4 +1,4 @@
-"""``make demo`` (until the companion lands): fly the vehicle process through a scripted offboard square.
+"""``flowgap-square``: fly the vehicle process through a scripted offboard square (no camera, no companion).
 
 Starts ``flowgap-vehicle`` as its own OS process, connects over MAVLink/UDP with pymavlink as an
 offboard client would, arms, takes off, enters Offboard, flies a square at constant altitude streaming
@@ -20,7 +20,7 @@ import time
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-log = logging.getLogger("flowgap-demo")
+log = logging.getLogger("flowgap-square")
 POSITION_ONLY = 0b1001_1111_1000  # type_mask: position + yaw
 
 
@@ -112,7 +112,7 @@ def fly_square(client: ScriptedClient, side: float, altitude: float, settle_s: f
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="flowgap-demo", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="flowgap-square", description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--side", type=float, default=2.0, help="square side in metres (default 2)")
     parser.add_argument("--altitude", type=float, default=1.5, help="flight altitude in metres (default 1.5)")
@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         client.connect(timeout=30)
         rows = fly_square(client, args.side, args.altitude, args.settle)
     except RuntimeError as exc:
-        print(f"flowgap-demo: error: {exc}", file=sys.stderr)
+        print(f"flowgap-square: error: {exc}", file=sys.stderr)
         return 1
     finally:
         client.close()

@@ -1,0 +1,121 @@
+"""``flowgap-companion`` / ``python -m companion``: see, decide and fly through the window over MAVLink."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+import time
+from pathlib import Path
+
+from companion.gap import get_detector
+from companion.link import BACKENDS, LinkError, make_link, parse_endpoint
+from companion.mission import Mission, MissionConfig, State
+from companion.runlog import RunLog
+
+log = logging.getLogger("flowgap-companion")
+
+EPILOG = """\
+examples:
+  flowgap-companion --scene window1_brick                      # SITL defaults: udpin://:14540, truth :14560
+  flowgap-companion --scene window2_stone --flow dis:medium --detector paper
+  flowgap-companion --connect serial:///dev/ttyUSB0:921600 ... # a real PX4 (needs a real camera source)
+
+exit status: 0 the mission completed (the vehicle's own verdict says whether it got through), 1 the mission
+failed (lost link, refused command, no gap), 2 bad input.
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="flowgap-companion",
+        description="Companion computer: renders the camera view, computes optical flow between successive "
+                    "frames, finds the gap by parallax, and flies through it with offboard position setpoints.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--connect", default="udpin://:14540", help="autopilot MAVLink URL (default %(default)s)")
+    p.add_argument("--link", choices=BACKENDS, default="pymavlink", help="link backend (default %(default)s)")
+    p.add_argument("--truth", default="udpin://:14560",
+                   help="ground-truth pose stream for the simulated camera (default %(default)s)")
+    p.add_argument("--scene", default="window1_brick", help="scene the simulated camera renders (default %(default)s)")
+    p.add_argument("--flow", default="dis:fine",
+                   help="flow backend[:preset|variant]: dis:fine, dis:medium, farneback, raft (default %(default)s)")
+    p.add_argument("--raft-weights", type=Path, help="RAFT weights file (default: the shipped ones)")
+    p.add_argument("--detector", choices=["parallax", "paper"], default="parallax",
+                   help="gap detector: ours (parallax) or the paper's colour/Canny pipeline (default %(default)s)")
+    p.add_argument("--render-backend", choices=["cpu", "torch"], default="cpu", help="splat renderer")
+    p.add_argument("--altitude", type=float, default=1.5, help="takeoff altitude in metres (default 1.5)")
+    p.add_argument("--finish", choices=["hold", "land"], default="hold", help="after the traversal (default hold)")
+    p.add_argument("--run-dir", type=Path, help="run log directory (default runs/<time>)")
+    p.add_argument("--no-images", action="store_true", help="do not save per-step PNGs (faster evaluations)")
+    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    return p
+
+
+def make_flow(spec: str, raft_weights: Path | None):
+    from companion.flow import make_flow_backend
+    from companion.flow.registry import parse_backend
+
+    name, options = parse_backend(spec)
+    if name == "raft" and raft_weights is not None:
+        options["weights"] = raft_weights
+    return make_flow_backend(name, **options)
+
+
+def _interrupt(_signum, _frame) -> None:
+    raise KeyboardInterrupt
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=args.log_level, format="%(asctime)s companion %(levelname)s %(message)s")
+    run_dir = args.run_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    try:
+        parse_endpoint(args.connect)
+        parse_endpoint(args.truth)
+        flow = make_flow(args.flow, args.raft_weights)
+        detector = get_detector(args.detector)
+        from companion.camera import SplatCamera
+
+        camera = SplatCamera(args.scene, args.truth, backend=args.render_backend)
+    except (ValueError, KeyError, FileNotFoundError, OSError) as exc:
+        print(f"flowgap-companion: error: {exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 — weights/scene errors from other packages: one line, not a traceback
+        print(f"flowgap-companion: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
+    runlog = RunLog(run_dir, images=not args.no_images)
+    try:
+        link = make_link(args.connect, args.link, tlog_path=runlog.tlog_path)
+    except (ValueError, LinkError, ImportError) as exc:
+        print(f"flowgap-companion: error: {exc}", file=sys.stderr)
+        camera.close()
+        return 2
+    mission = Mission(link, camera, flow, detector, runlog,
+                      config=MissionConfig(altitude_m=args.altitude, finish=args.finish))
+    signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops us with SIGTERM: end like Ctrl-C
+    try:
+        result = mission.run()
+    except KeyboardInterrupt:
+        log.warning("interrupted: asking the vehicle to hold")
+        try:
+            link.hold()
+        except LinkError:
+            pass
+        result = mission.result
+        result.reason = result.reason or "interrupted"
+    finally:
+        link.close()
+        camera.close()
+    summary = {"scene": args.scene, "flow": args.flow, "detector": args.detector, "link": args.link,
+               **result.as_dict()}
+    runlog.summary(summary)
+    runlog.close()
+    print(json.dumps({k: summary[k] for k in ("state", "reason", "servo_steps", "push_length_m")}))
+    log.info("run log in %s", run_dir)
+    return 0 if result.state is State.DONE else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,24 @@
+"""Autopilot links: ``make_link("udpin://:14540", backend="pymavlink" | "mavsdk")``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from companion.link.base import AutopilotLink, Endpoint, LinkError, LinkLost, TelemetryCache, parse_endpoint
+
+BACKENDS = ("pymavlink", "mavsdk")
+
+
+def make_link(url: str, backend: str = "pymavlink", tlog_path: Path | None = None) -> AutopilotLink:
+    if backend == "pymavlink":
+        from companion.link.pymavlink_link import PymavlinkLink
+
+        return PymavlinkLink(url, tlog_path=tlog_path)
+    if backend == "mavsdk":
+        from companion.link.mavsdk_link import MavsdkLink
+
+        return MavsdkLink(url)
+    raise ValueError(f"unknown link backend {backend!r}; choose one of {BACKENDS}")
+
+
+__all__ = ["AutopilotLink", "Endpoint", "LinkError", "LinkLost", "TelemetryCache", "make_link", "parse_endpoint"]

@@ -1,0 +1,187 @@
+"""The companion's view of an autopilot: one interface, two backends (pymavlink, MAVSDK).
+
+Everything the companion knows about the vehicle arrives through this interface, so the same mission
+flies the flowgap SITL vehicle or a real PX4 (or ArduPilot) vehicle. Positions are local NED metres.
+"""
+
+from __future__ import annotations
+
+import abc
+import bisect
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from urllib.parse import urlparse
+
+
+class LinkError(RuntimeError):
+    """The autopilot refused something or stopped answering; the message says what and why."""
+
+
+class LinkLost(LinkError):
+    """No heartbeat from the autopilot within the link timeout."""
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A parsed MAVLink endpoint URL."""
+
+    scheme: str  # udpin | udpout | tcp | serial
+    host: str
+    port: int  # serial: baud rate
+
+    @property
+    def mavutil(self) -> str:
+        """The pymavlink connection string."""
+        if self.scheme == "serial":
+            return self.host
+        return f"{self.scheme}:{self.host}:{self.port}"
+
+    @property
+    def mavsdk(self) -> str:
+        """The MAVSDK connection URL."""
+        if self.scheme == "serial":
+            return f"serial://{self.host}:{self.port}"
+        if self.scheme == "tcp":
+            return f"tcpout://{self.host}:{self.port}"
+        return f"{self.scheme}://{self.host}:{self.port}"
+
+
+def parse_endpoint(url: str) -> Endpoint:
+    """``udpin://:14540``, ``udpout://host:port``, ``tcp://host:port``, ``serial:///dev/ttyUSB0:921600``."""
+    parsed = urlparse(url)
+    scheme = parsed.scheme
+    if scheme == "serial":
+        device, _, baud = (parsed.netloc + parsed.path).rpartition(":")
+        if not device or not baud.isdigit():
+            raise ValueError(f"serial URL {url!r} needs a device and a baud rate, e.g. serial:///dev/ttyUSB0:921600")
+        return Endpoint("serial", device, int(baud))
+    if scheme not in ("udpin", "udpout", "tcp"):
+        raise ValueError(f"MAVLink URL {url!r}: scheme must be udpin, udpout, tcp or serial "
+                         f"(e.g. udpin://:14540)")
+    try:
+        port = parsed.port
+    except ValueError:
+        port = None
+    if port is None:
+        raise ValueError(f"MAVLink URL {url!r} needs a port, e.g. udpin://:14540")
+    host = parsed.hostname or ("0.0.0.0" if scheme == "udpin" else "127.0.0.1")
+    return Endpoint(scheme, host, port)
+
+
+@dataclass
+class TelemetryCache:
+    """The latest telemetry, updated by the link's receive thread and read by the mission."""
+
+    position: tuple[float, float, float] | None = None  # NED m (LOCAL_POSITION_NED)
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)  # NED m/s
+    attitude_euler: tuple[float, float, float] = (0.0, 0.0, 0.0)  # roll, pitch, yaw rad
+    mode: str = "UNKNOWN"
+    armed: bool = False
+    landed: bool | None = None  # None until EXTENDED_SYS_STATE says
+    home: tuple[float, float, float] | None = None  # lat°, lon°, alt m
+    autopilot: str = "unknown"
+    last_heartbeat: float = -math.inf  # time.monotonic()
+    position_time: float = -math.inf
+    statustexts: list[tuple[int, str]] = field(default_factory=list)
+    # (autopilot time s, roll, pitch, yaw): to read the attitude at a camera frame's time stamp
+    attitude_history: deque = field(default_factory=lambda: deque(maxlen=400), repr=False)
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def attitude_at(self, time_s: float) -> tuple[float, float, float]:
+        """Attitude (roll, pitch, yaw) at an autopilot time stamp, interpolated between samples (nearest
+        sample outside the recorded span; the latest attitude when there is no history)."""
+        with self.lock:
+            history = list(self.attitude_history)
+            latest = self.attitude_euler
+        if not history:
+            return latest
+        times = [h[0] for h in history]
+        i = bisect.bisect_left(times, time_s)
+        if i == 0:
+            return history[0][1:]
+        if i == len(history):
+            return history[-1][1:]
+        (t0, *a0), (t1, *a1) = history[i - 1], history[i]
+        w = (time_s - t0) / (t1 - t0) if t1 > t0 else 0.0
+        yaw_step = math.remainder(a1[2] - a0[2], math.tau)  # interpolate yaw across ±π
+        return (a0[0] + w * (a1[0] - a0[0]), a0[1] + w * (a1[1] - a0[1]), a0[2] + w * yaw_step)
+
+    def snapshot(self) -> TelemetryCache:
+        with self.lock:
+            return TelemetryCache(self.position, self.velocity, self.attitude_euler, self.mode, self.armed,
+                                  self.landed, self.home, self.autopilot, self.last_heartbeat,
+                                  self.position_time, list(self.statustexts))
+
+
+class AutopilotLink(abc.ABC):
+    """Connect, arm, take off, fly offboard position setpoints, land — for any MAVLink autopilot."""
+
+    name = "abstract"
+    heartbeat_timeout_s = 3.0
+
+    def __init__(self) -> None:
+        self.telemetry = TelemetryCache()
+
+    # --- lifecycle
+    @abc.abstractmethod
+    def connect(self, timeout_s: float = 30.0) -> None: ...
+
+    @abc.abstractmethod
+    def close(self) -> None: ...
+
+    # --- commands (raise LinkError with the autopilot's reason on refusal)
+    @abc.abstractmethod
+    def arm(self) -> None: ...
+
+    @abc.abstractmethod
+    def takeoff(self, altitude_m: float) -> None: ...
+
+    @abc.abstractmethod
+    def start_offboard(self, position: tuple[float, float, float], yaw: float) -> None:
+        """Stream ``position`` for ≥ 1 s at ≥ 10 Hz, then switch to the offboard (guided) mode."""
+
+    @abc.abstractmethod
+    def set_position_target(self, position: tuple[float, float, float], yaw: float) -> None:
+        """Replace the streamed setpoint; the link keeps sending it at 20 Hz from its own thread."""
+
+    @abc.abstractmethod
+    def hold(self) -> None: ...
+
+    @abc.abstractmethod
+    def land(self) -> None: ...
+
+    # --- shared helpers
+    def alive(self) -> bool:
+        return time.monotonic() - self.telemetry.last_heartbeat < self.heartbeat_timeout_s
+
+    def check_alive(self) -> None:
+        if not self.alive():
+            raise LinkLost(f"no heartbeat from the autopilot for {self.heartbeat_timeout_s:.0f} s: link lost")
+
+    def wait_for(self, predicate, timeout_s: float, what: str, period_s: float = 0.02) -> None:
+        """Wait until ``predicate(telemetry)``; LinkLost if heartbeats stop, LinkError on timeout."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            self.check_alive()
+            with self.telemetry.lock:
+                ok = predicate(self.telemetry)
+            if ok:
+                return
+            time.sleep(period_s)
+        raise LinkError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+
+    def wait_position(self, target, tolerance_m: float, timeout_s: float, speed_mps: float = 0.1) -> bool:
+        """Wait until the vehicle is within ``tolerance_m`` of ``target`` and slower than ``speed_mps``."""
+        def arrived(t: TelemetryCache) -> bool:
+            return (t.position is not None and math.dist(t.position, target) <= tolerance_m
+                    and math.hypot(*t.velocity) <= speed_mps)
+        try:
+            self.wait_for(arrived, timeout_s, f"arrival at {target}")
+            return True
+        except LinkLost:
+            raise
+        except LinkError:
+            return False

@@ -1,0 +1,283 @@
+"""The pymavlink backend: one receive thread, one 20 Hz setpoint thread, acked commands, a .tlog.
+
+Only the receive thread reads the connection, so no lock is ever held across a blocking receive and
+the setpoint stream never waits on perception or telemetry. Modes are set by name through pymavlink's
+tables (PX4: ``px4_map``; ArduPilot: ``mode_mapping_byname``), so PX4 and ArduPilot both fly.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from pathlib import Path
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from companion.link.base import AutopilotLink, LinkError, parse_endpoint
+from companion.link.tlog import TlogWriter
+
+log = logging.getLogger(__name__)
+
+POSITION_YAW_MASK = 0b1001_1111_1000  # SET_POSITION_TARGET_LOCAL_NED: use x, y, z and yaw only
+FORCE_ARM = 21196
+RESULT_NAMES = {v: k for k, v in vars(mavlink).items() if k.startswith("MAV_RESULT_") and isinstance(v, int)}
+# The offboard-style mode and the hold mode, per autopilot family.
+OFFBOARD_MODE = {"px4": "OFFBOARD", "ardupilot": "GUIDED"}
+HOLD_MODE = {"px4": "LOITER", "ardupilot": "BRAKE"}
+
+
+class PymavlinkLink(AutopilotLink):
+    name = "pymavlink"
+
+    def __init__(self, url: str, tlog_path: Path | None = None, setpoint_hz: float = 20.0,
+                 source_system: int = 1, source_component: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER):
+        super().__init__()
+        self.endpoint = parse_endpoint(url)
+        self.setpoint_hz = setpoint_hz
+        self._source = (source_system, source_component)
+        self._tlog = TlogWriter(tlog_path) if tlog_path else None
+        self._conn = None
+        self._send_lock = threading.Lock()
+        self._acks: dict[int, tuple[int, float]] = {}
+        self._ack_cond = threading.Condition()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._target: tuple[float, float, float, float] | None = None  # x, y, z, yaw
+        self._streamed = 0  # setpoints sent since the current target was set
+        self._target_system = 1
+        self._target_component = 1
+        self._autopilot_mav = None
+        self._vehicle_type = None
+        self._chunks: dict[int, list[str]] = {}
+        self.setpoint_times: list[float] = []  # monotonic send times, for rate checks
+
+    # ---------------------------------------------------------------------------- lifecycle
+    def connect(self, timeout_s: float = 30.0) -> None:
+        ep = self.endpoint
+        kwargs = {"baud": ep.port} if ep.scheme == "serial" else {}
+        try:
+            self._conn = mavutil.mavlink_connection(ep.mavutil, source_system=self._source[0],
+                                                    source_component=self._source[1], dialect="common",
+                                                    autoreconnect=True, **kwargs)
+        except OSError as exc:
+            raise LinkError(f"cannot open {ep.mavutil}: {exc}") from None
+        if self._tlog:
+            self._conn.mav.set_send_callback(lambda m: self._tlog.write(m.get_msgbuf()))
+        self._start_thread(self._receive_loop, "link-rx")
+        if ep.scheme == "udpout" or ep.scheme == "tcp":
+            self._send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                                                         mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
+        deadline = time.monotonic() + timeout_s
+        while not self.alive():
+            if time.monotonic() > deadline:
+                raise LinkError(f"no autopilot heartbeat on {ep.mavutil} within {timeout_s:.0f} s: is the "
+                                f"vehicle running and sending to this address?")
+            time.sleep(0.05)
+        log.info("connected to %s autopilot (system %d) on %s", self.telemetry.autopilot, self._target_system,
+                 ep.mavutil)
+        self._start_thread(self._stream_loop, "link-setpoints")
+        self._send(mavlink.MAVLink_command_long_message(self._target_system, self._target_component,
+                                                        mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+                                                        mavlink.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0))
+        # Attitude at 50 Hz: the companion derotates flow with the attitude at each capture.
+        self._send(mavlink.MAVLink_command_long_message(self._target_system, self._target_component,
+                                                        mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                                        mavlink.MAVLINK_MSG_ID_ATTITUDE, 20000, 0, 0, 0, 0, 0))
+
+    def close(self) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            thread.join(timeout=2)
+        if self._conn is not None:
+            self._conn.close()
+        if self._tlog:
+            self._tlog.close()
+
+    def _start_thread(self, target, name: str) -> None:
+        thread = threading.Thread(target=target, name=name, daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    # ------------------------------------------------------------------------------ receive
+    def _receive_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                msg = self._conn.recv_match(blocking=True, timeout=0.1)
+            except (OSError, ValueError) as exc:  # socket closed under us, or a mangled packet
+                if self._stop.is_set():
+                    return
+                log.debug("receive error: %s", exc)
+                continue
+            if msg is None or msg.get_type() == "BAD_DATA":
+                continue
+            if self._tlog:
+                self._tlog.write(msg.get_msgbuf())
+            try:
+                self._update_cache(msg)
+            except Exception:  # noqa: BLE001 — a strange message must not kill the link
+                log.exception("could not interpret %s", msg.get_type())
+
+    def _update_cache(self, msg) -> None:
+        kind = msg.get_type()
+        t = self.telemetry
+        if kind == "HEARTBEAT":
+            if msg.type in (mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER) \
+                    or msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID:
+                return
+            self._target_system, self._target_component = msg.get_srcSystem(), msg.get_srcComponent()
+            self._autopilot_mav, self._vehicle_type = msg.autopilot, msg.type
+            with t.lock:
+                t.last_heartbeat = time.monotonic()
+                t.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+                t.mode = mavutil.mode_string_v10(msg)
+                t.autopilot = "px4" if msg.autopilot == mavlink.MAV_AUTOPILOT_PX4 else (
+                    "ardupilot" if msg.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA else "other")
+        elif kind == "LOCAL_POSITION_NED":
+            with t.lock:
+                t.position = (msg.x, msg.y, msg.z)
+                t.velocity = (msg.vx, msg.vy, msg.vz)
+                t.position_time = time.monotonic()
+        elif kind == "ATTITUDE":
+            with t.lock:
+                t.attitude_euler = (msg.roll, msg.pitch, msg.yaw)
+                t.attitude_history.append((msg.time_boot_ms * 1e-3, msg.roll, msg.pitch, msg.yaw))
+        elif kind == "EXTENDED_SYS_STATE":
+            with t.lock:
+                if msg.landed_state != mavlink.MAV_LANDED_STATE_UNDEFINED:
+                    t.landed = msg.landed_state == mavlink.MAV_LANDED_STATE_ON_GROUND
+        elif kind == "HOME_POSITION":
+            with t.lock:
+                t.home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+        elif kind == "STATUSTEXT":
+            text = self._assemble(msg)
+            if text is not None:
+                log.info("autopilot: %s", text)
+                with t.lock:
+                    t.statustexts.append((msg.severity, text))
+        elif kind == "COMMAND_ACK":
+            with self._ack_cond:
+                self._acks[msg.command] = (msg.result, time.monotonic())
+                self._ack_cond.notify_all()
+
+    def _assemble(self, msg) -> str | None:
+        """Reassemble MAVLink 2 STATUSTEXT chunks (id != 0); None while a text is incomplete."""
+        text_id = getattr(msg, "id", 0)
+        if not text_id:
+            return msg.text
+        parts = self._chunks.setdefault(text_id, [])
+        parts.append(msg.text)
+        if len(msg.text) == 50:
+            return None
+        return "".join(self._chunks.pop(text_id))
+
+    # -------------------------------------------------------------------------------- send
+    def _send(self, msg) -> None:
+        with self._send_lock:
+            self._conn.mav.send(msg)
+
+    def _stream_loop(self) -> None:
+        period = 1.0 / self.setpoint_hz
+        next_time = time.monotonic()
+        next_heartbeat = next_time
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if now >= next_heartbeat:
+                next_heartbeat = now + 1.0
+                self._send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
+                                                             mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 4))
+            target = self._target
+            if target is not None:
+                x, y, z, yaw = target
+                self._send(mavlink.MAVLink_set_position_target_local_ned_message(
+                    int(now * 1000) & 0xFFFFFFFF, self._target_system, self._target_component,
+                    mavlink.MAV_FRAME_LOCAL_NED, POSITION_YAW_MASK, x, y, z, 0, 0, 0, 0, 0, 0, yaw, 0))
+                self._streamed += 1
+                self.setpoint_times.append(now)
+                del self.setpoint_times[:-2000]
+            next_time += period
+            self._stop.wait(max(0.0, next_time - time.monotonic()))
+
+    def command(self, command: int, *params: float, timeout_s: float = 3.0, retries: int = 3) -> None:
+        """COMMAND_LONG with retransmission; raises LinkError naming the result and the autopilot's reason."""
+        p = [float(v) for v in params] + [0.0] * (7 - len(params))
+        for attempt in range(retries):
+            sent = time.monotonic()
+            with self.telemetry.lock:
+                texts_before = len(self.telemetry.statustexts)
+            self._send(mavlink.MAVLink_command_long_message(self._target_system, self._target_component,
+                                                            command, attempt, *p))
+            with self._ack_cond:
+                got = self._ack_cond.wait_for(lambda sent=sent: self._acks.get(command, (None, -1.0))[1] >= sent,
+                                              timeout=timeout_s)
+                result = self._acks.get(command, (None, 0))[0] if got else None
+            if result is None:
+                self.check_alive()
+                continue
+            if result in (mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_IN_PROGRESS):
+                return
+            time.sleep(0.05)  # the reason arrives as a STATUSTEXT right after the ACK
+            with self.telemetry.lock:
+                reasons = [text for _, text in self.telemetry.statustexts[texts_before:]]
+            reason = f": {reasons[-1]}" if reasons else ""
+            raise LinkError(f"command {command} refused with {RESULT_NAMES.get(result, result)}{reason}")
+        raise LinkError(f"command {command}: no COMMAND_ACK after {retries} tries")
+
+    def set_mode(self, name: str) -> None:
+        if self._autopilot_mav == mavlink.MAV_AUTOPILOT_PX4:
+            base, main, sub = mavutil.px4_map[name]
+            self.command(mavlink.MAV_CMD_DO_SET_MODE, base, main, sub)
+        else:
+            mapping = mavutil.mode_mapping_byname(self._vehicle_type) or {}
+            if name not in mapping:
+                raise LinkError(f"mode {name!r} unknown for this autopilot; known: {sorted(mapping)}")
+            self.command(mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mapping[name])
+
+    # ---------------------------------------------------------------------------- commands
+    def arm(self) -> None:
+        self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+
+    def takeoff(self, altitude_m: float) -> None:
+        family = self.telemetry.autopilot
+        if family == "ardupilot":
+            self.set_mode("GUIDED")
+            self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, altitude_m)
+            return
+        home = self.telemetry.home
+        amsl = home[2] + altitude_m if home else math.nan
+        if home is None:  # PX4 falls back to MIS_TAKEOFF_ALT for a NaN altitude: set it first
+            self._send(mavlink.MAVLink_param_set_message(self._target_system, self._target_component,
+                                                         b"MIS_TAKEOFF_ALT", altitude_m,
+                                                         mavlink.MAV_PARAM_TYPE_REAL32))
+            time.sleep(0.1)
+        self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, amsl)
+
+    def start_offboard(self, position, yaw: float) -> None:
+        self.set_position_target(position, yaw)
+        # PX4 only accepts Offboard while setpoints stream: send them for at least a second first.
+        deadline = time.monotonic() + 5.0
+        while self._streamed < self.setpoint_hz and time.monotonic() < deadline:
+            self.check_alive()
+            time.sleep(0.02)
+        self.set_mode(OFFBOARD_MODE.get(self.telemetry.autopilot, "OFFBOARD"))
+
+    def set_position_target(self, position, yaw: float) -> None:
+        if not all(math.isfinite(v) for v in (*position, yaw)):
+            raise ValueError(f"setpoint {position}, yaw {yaw} is not finite")
+        new = (float(position[0]), float(position[1]), float(position[2]), float(yaw))
+        if new != self._target:
+            self._target = new
+            self._streamed = 0
+
+    def hold(self) -> None:
+        self._target = None
+        self.set_mode(HOLD_MODE.get(self.telemetry.autopilot, "LOITER"))
+
+    def land(self) -> None:
+        self._target = None
+        if self.telemetry.autopilot == "ardupilot":
+            self.set_mode("LAND")
+        else:
+            self.command(mavlink.MAV_CMD_NAV_LAND, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)

@@ -1,0 +1,254 @@
+"""The companion's mission: CONNECT → PREFLIGHT → ARM → TAKEOFF → OFFBOARD → SERVO → TRAVERSE → HOLD|LAND → DONE.
+
+Each servo step (DESIGN.md steps 1–6): move to the waypoint and wait for arrival, take a frame, compute
+flow against the previous frame, detect the gap, filter the centroid (τ_c), and derive the next waypoint.
+When centred and close, or when the step budget is spent, push through in 0.05 m increments (step 7).
+Every way out of the loop is a state: a lost link, a refused command, or no gap after N frames ends in
+FAILED with the reason, after asking the vehicle to hold (or land) where it can.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from companion.camera import CameraError, FrameSource
+from companion.flow.colour import flow_to_colour
+from companion.link.base import AutopilotLink, LinkError, LinkLost
+from companion.motion import derotate, level_pixel
+from companion.runlog import RunLog
+from companion.servo import (
+    ServoConfig,
+    heading_to_ned,
+    push_length,
+    push_waypoints,
+    servo_step,
+    wall_distance_from_flow,
+)
+from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
+
+log = logging.getLogger(__name__)
+
+
+class State(enum.Enum):
+    CONNECT = "connect"
+    PREFLIGHT = "preflight"
+    ARM = "arm"
+    TAKEOFF = "takeoff"
+    OFFBOARD = "offboard"
+    SERVO = "servo"
+    TRAVERSE = "traverse"
+    HOLD = "hold"
+    LAND = "land"
+    DONE = "done"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True)
+class MissionConfig:
+    altitude_m: float = 1.5  # takeoff altitude above home
+    connect_timeout_s: float = 30.0
+    preflight_timeout_s: float = 20.0
+    takeoff_timeout_s: float = 30.0
+    arrival_tolerance_m: float = 0.06  # a waypoint is reached within this distance ...
+    arrival_speed_mps: float = 0.15  # ... and below this speed (a steady view for the next frame)
+    step_timeout_s: float = 8.0  # wall seconds to reach one servo waypoint
+    no_gap_limit: int = 8  # servo steps without any gap ever seen before giving up
+    finish: str = "hold"  # after the traversal: "hold" or "land"
+
+
+@dataclass
+class MissionResult:
+    state: State
+    reason: str | None = None
+    servo_steps: int = 0
+    states: list[tuple[float, str]] = field(default_factory=list)
+    wall_distance_m: float | None = None
+    push_length_m: float | None = None
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["state"] = self.state.value
+        return d
+
+
+class Mission:
+    def __init__(self, link: AutopilotLink, camera: FrameSource, flow, detector, runlog: RunLog,
+                 servo: ServoConfig | None = None, config: MissionConfig | None = None,
+                 tracker: CentroidFilter | None = None, derotate_flow: bool = True):
+        self.link = link
+        self.camera = camera
+        self.flow = flow
+        self.detector = detector
+        self.runlog = runlog
+        self.servo = servo or ServoConfig()
+        self.config = config or MissionConfig()
+        self.tracker = tracker or ConfirmingCentroidFilter()
+        self.derotate = derotate_flow
+        self.result = MissionResult(State.CONNECT)
+        self._t0 = time.monotonic()
+
+    # ----------------------------------------------------------------------------------- run
+    def run(self) -> MissionResult:
+        try:
+            self._enter(State.CONNECT)
+            self.link.connect(self.config.connect_timeout_s)
+            self._enter(State.PREFLIGHT)
+            self.link.wait_for(lambda t: t.position is not None and t.landed is not None,
+                               self.config.preflight_timeout_s, "position estimate and landed state")
+            self._enter(State.ARM)
+            self.link.arm()
+            self._enter(State.TAKEOFF)
+            self.link.takeoff(self.config.altitude_m)
+            home_z = self.link.telemetry.position[2]
+            self.link.wait_for(lambda t: t.position is not None
+                               and abs(t.position[2] - (home_z - self.config.altitude_m)) < 0.1
+                               and math.hypot(*t.velocity) < 0.2,
+                               self.config.takeoff_timeout_s, "takeoff altitude")
+            self._enter(State.OFFBOARD)
+            start = self.link.telemetry.position
+            self.yaw = self.link.telemetry.attitude_euler[2]
+            self.link.start_offboard(start, self.yaw)
+            self._enter(State.SERVO)
+            waypoint, bias, wall_distance = self._servo(start)
+            self._enter(State.TRAVERSE)
+            self._traverse(waypoint, bias, wall_distance)
+            if self.config.finish == "land":
+                self._enter(State.LAND)
+                self.link.land()
+                self.link.wait_for(lambda t: not t.armed, 60, "landing")
+            else:
+                self._enter(State.HOLD)
+                self.link.hold()
+            self._enter(State.DONE)
+        except LinkLost as exc:
+            self._fail(f"link lost: {exc}", safe=False)
+        except (LinkError, CameraError, NoGapError) as exc:
+            self._fail(str(exc), safe=True)
+        return self.result
+
+    # --------------------------------------------------------------------------------- servo
+    def _servo(self, start):
+        """Servo steps until push; returns (last waypoint, lateral/vertical bias, wall distance)."""
+        cfg = self.servo
+        width, height = self.camera.width, self.camera.height
+        prev = self.camera.capture()
+        # The autopilot's attitude estimate at each frame's time stamp, as a real companion would take it.
+        prev_attitude = self.link.telemetry.attitude_at(prev.time_s)
+        self.runlog.save_images(0, rgb=prev.rgb)
+        waypoint = start
+        step = servo_step(None, 0.0, 0, width, height, cfg)
+        wall_distance = None
+        wall_estimates: list[float] = []  # forward coordinate of the wall, one per measurement
+        ever_seen = False
+        for k in range(cfg.step_budget):
+            t_step = time.monotonic()
+            delta = heading_to_ned(step.delta_heading, self.yaw)
+            waypoint = (waypoint[0] + delta[0], waypoint[1] + delta[1], waypoint[2] + delta[2])
+            self.link.set_position_target(waypoint, self.yaw)
+            arrived = self.link.wait_position(waypoint, self.config.arrival_tolerance_m,
+                                              self.config.step_timeout_s, self.config.arrival_speed_mps)
+            move_s = time.monotonic() - t_step
+            if not self.link.telemetry.armed:
+                raise LinkError("the vehicle disarmed during the servo phase (crash or failsafe)")
+            frame = self.camera.capture()
+            attitude = self.link.telemetry.attitude_at(frame.time_s)
+            t0 = time.perf_counter()
+            flow = self.flow.estimate(prev.rgb, frame.rgb)
+            if self.derotate:
+                flow = derotate(flow, self.camera.K, prev_attitude, attitude)
+            flow_ms = (time.perf_counter() - t0) * 1000
+            t0 = time.perf_counter()
+            detection = self.detector(flow)
+            detect_ms = (time.perf_counter() - t0) * 1000
+            # The servo reads image position as position error: measure it in a level camera (see level_pixel).
+            level = (level_pixel(detection.centroid, self.camera.K, attitude[0], attitude[1])
+                     if detection.centroid is not None else None)
+            used = self.tracker.update(level)
+            ever_seen |= detection.centroid is not None
+            area_frac = detection.area / float(width * height) if detection.centroid is not None else 0.0
+            moved = math.dist(prev.position, frame.position)
+            measured = wall_distance_from_flow(flow, detection.mask, moved)
+            here = self._forward(frame.position)
+            if measured is not None:
+                wall_estimates.append(here + measured)
+            # Each measurement places the wall in the world; their median is robust to the bad ones, and
+            # the distance ahead follows the vehicle's own motion between measurements.
+            wall_distance = float(np.median(wall_estimates)) - here if wall_estimates else None
+            next_step = servo_step(used, area_frac if used is not None else 0.0, k + 1, width, height, cfg,
+                                   wall_distance)
+            self.result.servo_steps = k + 1
+            self.runlog.save_images(k + 1, rgb=frame.rgb, flow_bgr=flow_to_colour(flow, bgr=True),
+                                    mask=detection.mask)
+            self.runlog.decision({
+                "step": k + 1, "t_wall_s": time.monotonic() - self._t0, "frame_time_s": frame.time_s,
+                "position_true": frame.position, "waypoint": waypoint, "arrived": arrived,
+                "centroid_raw": detection.centroid, "centroid_level": level, "centroid_used": used,
+                "attitude_est": attitude, "accepted": self.tracker.last_accepted,
+                "no_gap_reason": getattr(detection, "reason", None), "area_frac": area_frac,
+                "error": next_step.error, "next_delta_heading": next_step.delta_heading, "close": next_step.close,
+                "push": next_step.push, "wall_distance_m": measured,
+                "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": flow_ms,
+                           "detect_ms": detect_ms},
+            })
+            log.info("step %d: centroid %s used %s area %.3f error %s wall %.2f m%s", k + 1,
+                     _fmt(detection.centroid), _fmt(used), area_frac, _fmt(next_step.error),
+                     measured if measured is not None else math.nan, " → push" if next_step.push else "")
+            if not ever_seen and k + 1 >= self.config.no_gap_limit:
+                raise NoGapError(f"no gap found after {k + 1} frames")
+            prev, prev_attitude, step = frame, attitude, next_step
+            if next_step.push:
+                break
+        self.result.wall_distance_m = wall_distance
+        return waypoint, step.delta_heading[1:], wall_distance
+
+    def _forward(self, position) -> float:
+        """Coordinate along the initial heading (the direction of travel toward the wall)."""
+        return position[0] * math.cos(self.yaw) + position[1] * math.sin(self.yaw)
+
+    def _traverse(self, start, bias, wall_distance) -> None:
+        length = push_length(wall_distance, self.servo)
+        self.result.push_length_m = length
+        log.info("traversal: %.2f m forward in %.2f m increments (wall measured at %s m)", length,
+                 self.servo.push_increment_m, _fmt(wall_distance))
+        points = push_waypoints(start, self.yaw, length, bias, self.servo)
+        period = 1.0 / 20.0  # one increment per setpoint period: ~1 m/s, level
+        for p in points:
+            self.link.set_position_target(p, self.yaw)
+            self.link.check_alive()
+            time.sleep(period)
+        self.link.wait_position(points[-1], 0.1, self.config.step_timeout_s, 0.3)
+
+    # ------------------------------------------------------------------------------- states
+    def _enter(self, state: State) -> None:
+        self.result.state = state
+        self.result.states.append((round(time.monotonic() - self._t0, 3), state.value))
+        log.info("state: %s", state.value.upper())
+
+    def _fail(self, reason: str, safe: bool) -> None:
+        log.error("mission failed in %s: %s", self.result.state.value.upper(), reason)
+        failed_in = self.result.state
+        self.result.reason = f"{failed_in.value}: {reason}"
+        self._enter(State.FAILED)
+        if safe and failed_in not in (State.CONNECT, State.PREFLIGHT, State.ARM):
+            try:
+                self.link.hold()
+            except LinkError as exc:
+                log.error("could not command Hold after the failure: %s", exc)
+
+
+class NoGapError(RuntimeError):
+    """The detector never found a gap within the allowed number of frames."""
+
+
+def _fmt(value) -> str:
+    if value is None:
+        return "none"
+    if isinstance(value, (tuple, list, np.ndarray)):
+        return "(" + ", ".join(f"{v:.2f}" for v in value) + ")"
+    return f"{value:.2f}"

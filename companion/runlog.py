@@ -1,0 +1,60 @@
+"""A flight's run directory: the link's tlog, per-step images, one JSON line per decision, a summary."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+
+def _jsonable(value):
+    if isinstance(value, float):
+        return round(value, 5) if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return _jsonable(value.item())
+    return value
+
+
+class RunLog:
+    """Layout: ``link.tlog``, ``frames/NNN.png``, ``flow/NNN.png``, ``masks/NNN.png``, ``decisions.jsonl``,
+    ``summary.json``. Image saving can be switched off for evaluation runs (``images=False``)."""
+
+    def __init__(self, run_dir: Path, images: bool = True):
+        self.dir = Path(run_dir)
+        self.images = images
+        self.dir.mkdir(parents=True, exist_ok=True)
+        for sub in ("frames", "flow", "masks"):
+            (self.dir / sub).mkdir(exist_ok=True)
+        self._decisions = open(self.dir / "decisions.jsonl", "w")  # noqa: SIM115 — closed in close()
+
+    @property
+    def tlog_path(self) -> Path:
+        return self.dir / "link.tlog"
+
+    def save_images(self, step: int, rgb: np.ndarray | None = None, flow_bgr: np.ndarray | None = None,
+                    mask: np.ndarray | None = None) -> None:
+        if not self.images:
+            return
+        if rgb is not None:
+            cv2.imwrite(str(self.dir / "frames" / f"{step:03d}.png"), rgb[:, :, ::-1])
+        if flow_bgr is not None:
+            cv2.imwrite(str(self.dir / "flow" / f"{step:03d}.png"), flow_bgr)
+        if mask is not None:
+            cv2.imwrite(str(self.dir / "masks" / f"{step:03d}.png"), mask.astype(np.uint8) * 255)
+
+    def decision(self, record: dict) -> None:
+        self._decisions.write(json.dumps(_jsonable(record)) + "\n")
+        self._decisions.flush()
+
+    def summary(self, record: dict) -> None:
+        (self.dir / "summary.json").write_text(json.dumps(_jsonable(record), indent=2) + "\n")
+
+    def close(self) -> None:
+        self._decisions.close()

@@ -1,0 +1,134 @@
+"""Image-based visual servoing toward the gap (DESIGN.md steps 5–7), as pure functions.
+
+Sign convention (DESIGN.md step 5, correcting the paper): with a forward camera in FRD, a gap seen to
+the right of the image centre (e_u > 0) is to the vehicle's right (+y in NED when heading north), so the
+lateral step is Δy = +κ_y·e_u; likewise a gap below the centre (e_v > 0) is lower, Δz = +κ_z·e_v (NED z
+is down). Steps are taken in the heading frame and rotated into NED by the current yaw.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ServoConfig:
+    """Constants of the servo law; the paper's values where it gives them, ours (measured) elsewhere."""
+
+    kappa_y: float = 0.30  # m per unit normalised error (paper)
+    kappa_z: float = 0.30  # m per unit normalised error (paper)
+    forward_step_m: float = 0.20  # δ_f in the servo phase (paper silent; ours: steps scaled with the measured
+                                  # wall distance flew worse, the flow-based distance is poor on short steps)
+    lateral_clamp_far_m: float = 0.06  # |Δy|, |Δz| limit during early steps (paper)
+    lateral_clamp_close_m: float = 0.12  # ... when close to the window (paper)
+    close_area_frac: float = 0.10  # mask area / image area from which the vehicle counts as "close" (ours)
+    close_distance_m: float = 1.6  # ... or measured wall distance below this (ours)
+    push_area_frac: float = 0.20  # centred and at least this large: push through now (ours)
+    push_distance_m: float = 1.1  # centred and the wall at most this far: push through now (ours)
+    last_call_distance_m: float = 0.8  # the wall this close: push through whatever the centring (ours)
+    centred_tol: float = 0.12  # |e_u|, |e_v| below this counts as centred (ours)
+    step_budget: int = 16  # servo steps before pushing through regardless (paper)
+    push_increment_m: float = 0.05  # forward increment of the final traversal (paper)
+    push_margin_m: float = 0.55  # how far past the wall's back face the push ends (ours)
+    push_default_m: float = 2.0  # traversal length when the wall distance could not be measured (ours)
+    push_max_beyond_wall_m: float = 1.2  # never push further than this past the wall (scenes put a background
+                                         # surface 2 m behind it; a real room has one too)
+    wall_thickness_m: float = 0.15  # assumed wall depth for the push length (suite walls are 0.15 m)
+
+
+@dataclass(frozen=True)
+class ServoStep:
+    """One decision: the step to take and why."""
+
+    delta_heading: tuple[float, float, float]  # forward, right, down in the heading frame, metres
+    error: tuple[float, float] | None  # (e_u, e_v), None without a centroid
+    close: bool
+    push: bool  # time to stop servoing and traverse
+
+
+def normalised_error(centroid: tuple[float, float], width: int, height: int) -> tuple[float, float]:
+    """DESIGN.md step 5: e_u = (u − W/2)/(W/2), e_v = (v − H/2)/(H/2)."""
+    u, v = centroid
+    return (u - width / 2) / (width / 2), (v - height / 2) / (height / 2)
+
+
+def servo_step(centroid: tuple[float, float] | None, area_frac: float, step_index: int, width: int,
+               height: int, config: ServoConfig = ServoConfig(), wall_distance_m: float | None = None) -> ServoStep:
+    """The paper's law with our corrected sign: Δp = [δ_f, κ_y·e_u, κ_z·e_v], clamped; forward only without
+    a centroid (new parallax baseline). ``step_index`` counts the steps already taken."""
+    budget_spent = step_index + 1 >= config.step_budget
+    near = wall_distance_m is not None and wall_distance_m <= config.last_call_distance_m
+    forward = config.forward_step_m
+    if centroid is None:
+        return ServoStep((forward, 0.0, 0.0), None, False, budget_spent or near)
+    e_u, e_v = normalised_error(centroid, width, height)
+    close = area_frac >= config.close_area_frac or (
+        wall_distance_m is not None and wall_distance_m <= config.close_distance_m)
+    clamp = config.lateral_clamp_close_m if close else config.lateral_clamp_far_m
+    dy = float(np.clip(config.kappa_y * e_u, -clamp, clamp))
+    dz = float(np.clip(config.kappa_z * e_v, -clamp, clamp))
+    centred = abs(e_u) <= config.centred_tol and abs(e_v) <= config.centred_tol
+    large = area_frac >= config.push_area_frac or (
+        wall_distance_m is not None and wall_distance_m <= config.push_distance_m)
+    push = (centred and large) or budget_spent or near
+    return ServoStep((forward, dy, dz), (e_u, e_v), close, push)
+
+
+def heading_to_ned(delta: tuple[float, float, float], yaw: float) -> tuple[float, float, float]:
+    f, r, d = delta
+    c, s = math.cos(yaw), math.sin(yaw)
+    return (c * f - s * r, s * f + c * r, d)
+
+
+def push_length(wall_distance_m: float | None, config: ServoConfig = ServoConfig()) -> float:
+    """How far to traverse: past the wall's back face by the margin, bounded so as not to fly on into
+    whatever stands behind the opening."""
+    if wall_distance_m is None or not math.isfinite(wall_distance_m) or wall_distance_m <= 0:
+        return config.push_default_m
+    beyond = min(config.push_margin_m, config.push_max_beyond_wall_m)
+    return wall_distance_m + config.wall_thickness_m + beyond
+
+
+def push_waypoints(start: tuple[float, float, float], yaw: float, length_m: float,
+                   bias: tuple[float, float], config: ServoConfig = ServoConfig()) -> list[tuple[float, float, float]]:
+    """DESIGN.md step 7: N_f forward increments of 0.05 m, spreading the last small lateral/vertical bias
+    correction over the first half of the push, level flight (position setpoints only)."""
+    n = max(1, int(math.ceil(length_m / config.push_increment_m)))
+    limit = config.lateral_clamp_far_m  # "small" bias corrections: never more than an early servo step
+    bias = (float(np.clip(bias[0], -limit, limit)), float(np.clip(bias[1], -limit, limit)))
+    half = max(1, n // 2)
+    points, p = [], start
+    for i in range(n):
+        share = 1.0 / half if i < half else 0.0
+        step = heading_to_ned((config.push_increment_m, bias[0] * share, bias[1] * share), yaw)
+        p = (p[0] + step[0], p[1] + step[1], p[2] + step[2])
+        points.append(p)
+    return points
+
+
+def wall_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, translation_m: float,
+                            motion_direction_cam: tuple[float, float, float] | None = None) -> float | None:
+    """Metric distance to the nearer surface (the wall) from flow and the known length of the camera's
+    translation between the frames: for a translating camera the flow is (|T|/Z)·g, so Z = |T|/ρ with ρ
+    the relative inverse depth. Uses the median over measurable pixels outside the gap."""
+    from companion.gap import CameraMotion, inverse_depth_from_flow
+
+    if translation_m <= 1e-3:
+        return None
+    rho, valid = inverse_depth_from_flow(flow, CameraMotion(translation=motion_direction_cam))
+    keep = valid & np.isfinite(rho) & (rho > 0)
+    if gap_mask is not None:
+        keep &= ~gap_mask.astype(bool)
+    h, w = keep.shape
+    core = np.zeros_like(keep)
+    core[h // 6: h - h // 6, w // 6: w - w // 6] = True  # the wall around the gap, not the floor at the edges
+    keep &= core
+    if keep.sum() < 0.02 * h * w:
+        return None
+    # The wall is the nearest large surface: the 60th percentile of inverse depth in the core leans toward
+    # it and away from far pixels the gap mask missed.
+    rho_wall = float(np.percentile(rho[keep], 60))
+    return translation_m / rho_wall if rho_wall > 0 else None

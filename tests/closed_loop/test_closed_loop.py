@@ -1,0 +1,90 @@
+"""Both sides in one process over 127.0.0.1: the vehicle server (with the scene's collision geometry) and
+the companion's mission (DIS flow, our parallax detector), judged by the vehicle's own ground truth."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+from companion.camera import SplatCamera
+from companion.flow import make_flow_backend
+from companion.gap import get_detector
+from companion.link import make_link
+from companion.mission import Mission, MissionConfig, State
+from companion.runlog import RunLog
+from scenes.collision import load_collision
+from sitl_vehicle.modes import FlightMode
+from sitl_vehicle.sim import VehicleConfig
+
+SCENE = "window1_brick"
+
+
+def make_mission(api_port, truth_port, run_dir):
+    link = make_link(f"udpin://127.0.0.1:{api_port}", tlog_path=run_dir / "link.tlog")
+    camera = SplatCamera(SCENE, f"udpin://127.0.0.1:{truth_port}")
+    mission = Mission(link, camera, make_flow_backend("dis", preset="fine"), get_detector("parallax"),
+                      RunLog(run_dir), config=MissionConfig(step_timeout_s=6.0))
+    return mission, link, camera
+
+
+def test_closed_loop_flight_through_a_suite_window(vehicle_for_link, tmp_path):
+    server, api, truth = vehicle_for_link(vehicle=VehicleConfig(), world=load_collision(SCENE), scene=SCENE, seed=0)
+    mission, link, camera = make_mission(api, truth, tmp_path)
+    try:
+        result = mission.run()
+    finally:
+        link.close()
+        camera.close()
+        mission.runlog.close()
+    time.sleep(0.5)
+    verdict = server.verdict()
+    assert result.state is State.DONE, result.reason
+    assert verdict["crossed_wall"] and not verdict["collision"], verdict
+    assert verdict["success"] and result.servo_steps >= 3
+    lines = (tmp_path / "decisions.jsonl").read_text().splitlines()
+    assert len(lines) == result.servo_steps
+    assert len(list((tmp_path / "masks").glob("*.png"))) == result.servo_steps
+
+
+def _run_in_thread(mission):
+    out = {}
+    thread = threading.Thread(target=lambda: out.setdefault("result", mission.run()), daemon=True)
+    thread.start()
+    return thread, out
+
+
+def test_vehicle_disappearing_mid_flight_is_a_clear_companion_failure(vehicle_for_link, tmp_path):
+    server, api, truth = vehicle_for_link(world=load_collision(SCENE), scene=SCENE)
+    mission, link, camera = make_mission(api, truth, tmp_path)
+    thread, out = _run_in_thread(mission)
+    try:
+        assert _wait(lambda: mission.result.state is State.SERVO, 30), mission.result
+        server.stop()  # the vehicle process is gone
+        thread.join(timeout=30)
+    finally:
+        link.close()
+        camera.close()
+    result = out["result"]
+    assert result.state is State.FAILED and "link lost" in result.reason
+
+
+def test_companion_disappearing_mid_flight_makes_the_vehicle_fail_safe(vehicle_for_link, tmp_path):
+    server, api, truth = vehicle_for_link(world=load_collision(SCENE), scene=SCENE)
+    mission, link, camera = make_mission(api, truth, tmp_path)
+    thread, _ = _run_in_thread(mission)
+    assert _wait(lambda: mission.result.state is State.SERVO, 30), mission.result
+    link.close()  # the companion is gone: its setpoint stream stops
+    camera.close()
+    assert _wait(lambda: server.commander.failsafe, 10)
+    assert server.commander.mode is FlightMode.AUTO_LOITER and server.sim.armed and not server.sim.crashed
+    thread.join(timeout=30)
+
+
+def _wait(predicate, timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return False
+

@@ -1,0 +1,81 @@
+"""The companion's pymavlink link against the SITL vehicle: commands, offboard streaming, link loss."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from companion.link import LinkError, LinkLost, make_link, parse_endpoint
+
+
+@pytest.mark.parametrize("url, mavutil_str", [
+    ("udpin://:14540", "udpin:0.0.0.0:14540"),
+    ("udpout://10.0.0.2:14550", "udpout:10.0.0.2:14550"),
+    ("tcp://127.0.0.1:5760", "tcp:127.0.0.1:5760"),
+    ("serial:///dev/ttyUSB0:921600", "/dev/ttyUSB0"),
+])
+def test_endpoint_urls(url, mavutil_str):
+    assert parse_endpoint(url).mavutil == mavutil_str
+
+
+@pytest.mark.parametrize("url", ["14540", "udp://:14540", "udpin://:", "serial:///dev/ttyUSB0"])
+def test_bad_endpoint_urls_name_the_fix(url):
+    with pytest.raises(ValueError, match="e.g."):
+        parse_endpoint(url)
+
+
+def test_fly_with_the_link_and_keep_streaming_while_busy(vehicle_for_link, tmp_path):
+    server, port, _ = vehicle_for_link()
+    link = make_link(f"udpin://127.0.0.1:{port}", tlog_path=tmp_path / "link.tlog")
+    try:
+        link.connect(timeout_s=10)
+        assert link.telemetry.autopilot == "px4"
+        link.wait_for(lambda t: t.home is not None and t.position is not None, 5, "home and position")
+        link.arm()
+        link.takeoff(1.2)
+        link.wait_for(lambda t: abs(t.position[2] + 1.2) < 0.05, 15, "takeoff altitude")
+        link.start_offboard((0.0, 0.0, -1.2), 0.0)
+        link.wait_for(lambda t: t.mode == "OFFBOARD", 3, "offboard mode")
+        link.set_position_target((0.6, 0.3, -1.2), 0.0)
+        # Perception hogging the interpreter for a while must not starve the setpoint stream.
+        start = time.monotonic()
+        busy = 0
+        while time.monotonic() - start < 1.5:
+            busy += sum(i * i for i in range(2000))
+        sent = [t for t in link.setpoint_times if t >= start]
+        gaps = [b - a for a, b in zip(sent, sent[1:], strict=False)]
+        assert len(sent) >= 15 and max(gaps) < 0.1, f"setpoint stream stalled: max gap {max(gaps):.3f} s"
+        assert link.wait_position((0.6, 0.3, -1.2), 0.05, 10)
+        with pytest.raises(LinkError, match="refused"):
+            link.command(4242)  # unsupported: the error names the result
+        link.land()
+        link.wait_for(lambda t: not t.armed, 30, "landing and disarm")
+    finally:
+        link.close()
+    assert (tmp_path / "link.tlog").stat().st_size > 1000
+
+
+def test_vehicle_disappearing_is_a_clear_link_loss(vehicle_for_link):
+    server, port, _ = vehicle_for_link()
+    link = make_link(f"udpin://127.0.0.1:{port}")
+    try:
+        link.connect(timeout_s=10)
+        server.stop()
+        with pytest.raises(LinkLost, match="link lost"):
+            link.wait_for(lambda t: False, 10, "something that never happens")
+    finally:
+        link.close()
+
+
+def test_refusal_carries_the_autopilots_reason(vehicle_for_link):
+    _, port, _ = vehicle_for_link()
+    link = make_link(f"udpin://127.0.0.1:{port}")
+    try:
+        link.connect(timeout_s=10)
+        with pytest.raises(LinkError, match="not possible: no setpoint stream"):
+            link.set_mode("OFFBOARD")
+        assert math.isinf(-link.telemetry.position_time) is False
+    finally:
+        link.close()

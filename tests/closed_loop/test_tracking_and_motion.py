@@ -1,0 +1,66 @@
+"""Our centroid filter's safeguards, and flow derotation with the attitude change."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.motion import body_to_world_from_euler, derotate, rotational_flow
+from companion.tracking import ConfirmingCentroidFilter
+
+
+def test_first_centroid_needs_confirmation():
+    f = ConfirmingCentroidFilter()
+    assert f.update((100, 100)) is None and not f.last_accepted
+    assert f.update((110, 105)) == (110, 105) and f.last_accepted
+
+
+def test_a_single_false_first_detection_does_not_lock_the_filter():
+    f = ConfirmingCentroidFilter()
+    f.update((300, 20))  # false
+    f.update((150, 120))  # true, twice
+    assert f.update((152, 121)) == (152, 121)
+
+
+def test_within_tau_follows_and_a_jump_is_rejected_once_then_reacquired():
+    f = ConfirmingCentroidFilter(reacquire_after=2)
+    f.update((150, 120))
+    f.update((150, 120))
+    assert f.update((180, 130)) == (180, 130)  # within 80 px
+    assert f.update((20, 20)) == (180, 130) and not f.last_accepted  # a jump: reuse
+    assert f.update(None) == (180, 130)
+    f.update((300, 200))
+    assert f.update((305, 205)) == (305, 205)  # two agreeing fresh detections: the old one was stale
+
+
+def test_rotational_flow_is_zero_without_rotation_and_derotate_removes_it():
+    K = np.array([[156.4, 0, 160.0], [0, 156.4, 120.0], [0, 0, 1.0]])
+    a1, a2 = (0.01, -0.02, 0.3), (0.013, -0.015, 0.302)
+    same = body_to_world_from_euler(*a1)
+    assert np.abs(rotational_flow(K, same, same, 240, 320)).max() < 1e-9
+    rot = rotational_flow(K, body_to_world_from_euler(*a1), body_to_world_from_euler(*a2), 240, 320)
+    assert np.abs(rot).max() > 0.5  # 0.3° of pitch is more than a pixel
+    assert np.abs(derotate(rot, K, a1, a2)).max() < 1e-4
+
+
+def test_pitch_up_moves_the_image_down():
+    # Nose up (positive pitch in FRD/NED): the scene moves down in the image (v grows).
+    K = np.array([[156.4, 0, 160.0], [0, 156.4, 120.0], [0, 0, 1.0]])
+    flow = rotational_flow(K, body_to_world_from_euler(0, 0, 0), body_to_world_from_euler(0, math.radians(1), 0),
+                           240, 320)
+    assert flow[120, 160, 1] == pytest.approx(156.4 * math.tan(math.radians(1)), rel=1e-3)
+
+
+def test_level_pixel_undoes_the_pitch():
+    from companion.motion import level_pixel
+
+    K = np.array([[156.4, 0, 160.0], [0, 156.4, 120.0], [0, 0, 1.0]])
+    pitched = rotational_flow(K, body_to_world_from_euler(0, 0, 0), body_to_world_from_euler(0, math.radians(4), 0),
+                              240, 320)
+    # A point at the level image centre seen by the nose-up camera, mapped back to the level camera.
+    u, v = 160.0 + pitched[120, 160, 0], 120.0 + pitched[120, 160, 1]
+    assert v > 130  # nose up: the point appears lower
+    assert level_pixel((u, v), K, 0.0, math.radians(4)) == pytest.approx((160.0, 120.0), abs=0.05)
+    assert level_pixel((100.0, 50.0), K, 0.0, 0.0) == pytest.approx((100.0, 50.0))

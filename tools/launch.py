@@ -1,0 +1,174 @@
+"""``flowgap-sitl``: the two-process SITL — the simulated PX4 vehicle and the companion, talking only MAVLink.
+
+Starts ``flowgap-vehicle`` and ``flowgap-companion`` as two OS processes with matching addresses (PX4's
+instance numbering: API 14540+N, truth 14560+N), streams their logs with a prefix, stops both when the
+companion's mission ends (or on Ctrl-C), and reports the verdict the *vehicle* wrote from its own ground
+truth: no companion code marks its own homework.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+log = logging.getLogger("flowgap-sitl")
+
+
+def _pump(stream, prefix: str, sink) -> None:
+    for line in iter(stream.readline, ""):
+        if sink is not None:
+            sink.write(f"{prefix} {line}")
+            sink.flush()
+    stream.close()
+
+
+def _start(cmd: list[str], prefix: str, sink) -> subprocess.Popen:
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1)
+    threading.Thread(target=_pump, args=(proc.stdout, prefix, sink), daemon=True).start()
+    return proc
+
+
+def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0, instance: int = 0,
+           flow: str = "dis:fine", detector: str = "parallax", seed: int = 0, no_noise: bool = False,
+           timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout) -> dict:
+    """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json)."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    api, truth = 14540 + instance, 14560 + instance
+    vehicle_result = run_dir / "vehicle_result.json"
+    vehicle_cmd = [sys.executable, "-m", "sitl_vehicle", "--scene", scene, "--instance", str(instance),
+                   "--start", ",".join(f"{v:g}" for v in start), "--speed", f"{speed:g}", "--seed", str(seed),
+                   "--result", str(vehicle_result), "--log-level", "WARNING"]
+    if no_noise:
+        vehicle_cmd.append("--no-noise")
+    companion_cmd = [sys.executable, "-m", "companion", "--connect", f"udpin://127.0.0.1:{api}",
+                     "--truth", f"udpin://127.0.0.1:{truth}", "--scene", scene, "--flow", flow,
+                     "--detector", detector, "--run-dir", str(run_dir / "companion")]
+    if not images:
+        companion_cmd.append("--no-images")
+    t0 = time.monotonic()
+    companion = _start(companion_cmd, "[companion]", log_sink)
+    vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink)
+    interrupted = False
+    try:
+        while companion.poll() is None:
+            if vehicle.poll() is not None:
+                log.error("the vehicle process exited (code %s) before the mission ended", vehicle.returncode)
+                break
+            if time.monotonic() - t0 > timeout_s:
+                log.error("flight timed out after %.0f s", timeout_s)
+                break
+            time.sleep(0.1)
+        time.sleep(1.0 / max(speed, 0.1))  # let the vehicle settle in Hold before the verdict is taken
+    except KeyboardInterrupt:
+        interrupted = True
+        log.warning("interrupted: stopping both processes")
+    finally:
+        _stop(companion)
+        _stop(vehicle)
+    wall = time.monotonic() - t0
+    vehicle_verdict = json.loads(vehicle_result.read_text()) if vehicle_result.exists() else {}
+    summary_path = run_dir / "companion" / "summary.json"
+    companion_summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    verdict = {
+        "scene": scene,
+        "success": bool(vehicle_verdict.get("success", False)) and not interrupted,
+        "collision": vehicle_verdict.get("collision"),
+        "crossed_wall": vehicle_verdict.get("crossed_wall"),
+        "min_clearance_m": vehicle_verdict.get("min_clearance_m"),
+        "crash_reason": vehicle_verdict.get("crash_reason"),
+        "servo_steps": companion_summary.get("servo_steps"),
+        "companion_state": companion_summary.get("state"),
+        "companion_reason": companion_summary.get("reason"),
+        "sim_time_s": vehicle_verdict.get("sim_time_s"),
+        "wall_time_s": round(wall, 2),
+        "start_ned": list(start),
+        "flow": flow,
+        "detector": detector,
+        "run_dir": str(run_dir),
+    }
+    if not vehicle_verdict:
+        verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
+    (run_dir / "verdict.json").write_text(json.dumps(verdict, indent=2) + "\n")
+    return verdict
+
+
+def describe(v: dict) -> str:
+    if v["success"]:
+        return (f"SUCCESS: flew through {v['scene']} in {v['servo_steps']} servo steps, min clearance "
+                f"{v['min_clearance_m']} m, {v['sim_time_s']} s simulated, {v['wall_time_s']} s wall")
+    why = v.get("crash_reason") or v.get("companion_reason") or v.get("error") or (
+        "did not cross the wall" if not v.get("crossed_wall") else "unknown")
+    return f"FAILED: {v['scene']}: {why}"
+
+
+def _triple(text: str) -> tuple[float, float, float]:
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"{text!r} must be three comma-separated numbers, e.g. 0,0.3,0")
+    return values  # type: ignore[return-value]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="flowgap-sitl", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="example: flowgap-sitl --scene window2_stone --start 0,0.3,0 "
+                                       "--result runs/verdict.json")
+    p.add_argument("--scene", default="window1_brick", help="suite scene name or spec path (default %(default)s)")
+    p.add_argument("--start", type=_triple, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
+                   help="vehicle start position NED (default 0,0,0: on the ground, 3 m before the wall)")
+    p.add_argument("--speed", type=float, default=2.0, help="simulation speed-up (default 2)")
+    p.add_argument("--instance", type=int, default=0, help="port offset, to run several flights at once")
+    p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
+    p.add_argument("--detector", default="parallax", choices=["parallax", "paper"], help="gap detector")
+    p.add_argument("--seed", type=int, default=0, help="vehicle sensor-noise seed")
+    p.add_argument("--no-noise", action="store_true", help="exact-truth vehicle estimate")
+    p.add_argument("--run-dir", type=Path, help="where logs go (default runs/<time>-<scene>)")
+    p.add_argument("--result", type=Path, help="also write the verdict JSON here")
+    p.add_argument("--timeout", type=float, default=300.0, help="wall seconds before giving up (default 300)")
+    p.add_argument("--quiet", action="store_true", help="do not stream the two processes' logs")
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s sitl %(levelname)s %(message)s")
+    if not args.speed > 0:
+        print(f"flowgap-sitl: error: --speed must be positive, got {args.speed}", file=sys.stderr)
+        return 2
+    try:
+        from scenes.build import resolve_spec
+
+        resolve_spec(args.scene)
+    except Exception as exc:  # noqa: BLE001 — unknown scene names and bad spec files: one line
+        print(f"flowgap-sitl: error: scene {args.scene!r}: {exc}", file=sys.stderr)
+        return 2
+    run_dir = args.run_dir or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.scene}"
+    verdict = launch(args.scene, run_dir, args.start, args.speed, args.instance, args.flow, args.detector,
+                     args.seed, args.no_noise, args.timeout, log_sink=None if args.quiet else sys.stdout)
+    if args.result:
+        args.result.parent.mkdir(parents=True, exist_ok=True)
+        args.result.write_text(json.dumps(verdict, indent=2) + "\n")
+    print(json.dumps(verdict, indent=2))
+    print(describe(verdict))
+    return 0 if verdict["success"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
