@@ -27,8 +27,9 @@ class ServoConfig:
     close_area_frac: float = 0.10  # mask area / image area from which the vehicle counts as "close" (ours)
     close_distance_m: float = 1.6  # ... or measured wall distance below this (ours)
     push_area_frac: float = 0.20  # centred and at least this large: push through now (ours)
-    push_distance_m: float = 1.1  # centred and the wall at most this far: push through now (ours)
-    last_call_distance_m: float = 0.8  # the wall this close: push through whatever the centring (ours)
+    push_distance_m: float = 1.4  # centred and the wall at most this far: push through now (ours; measured:
+                                  # detection degrades inside ~1 m, where the opening fills the view)
+    last_call_distance_m: float = 1.1  # the wall this close: push through whatever the centring (ours)
     centred_tol: float = 0.12  # |e_u|, |e_v| below this counts as centred (ours)
     step_budget: int = 16  # servo steps before pushing through regardless (paper)
     push_increment_m: float = 0.05  # forward increment of the final traversal (paper)

@@ -47,7 +47,7 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 
 def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0, instance: int = 0,
            flow: str = "dis:fine", detector: str = "parallax", seed: int = 0, no_noise: bool = False,
-           timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout) -> dict:
+           timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float = 1.5) -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     api, truth = 14540 + instance, 14560 + instance
@@ -59,7 +59,7 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         vehicle_cmd.append("--no-noise")
     companion_cmd = [sys.executable, "-m", "companion", "--connect", f"udpin://127.0.0.1:{api}",
                      "--truth", f"udpin://127.0.0.1:{truth}", "--scene", scene, "--flow", flow,
-                     "--detector", detector, "--run-dir", str(run_dir / "companion")]
+                     "--detector", detector, "--run-dir", str(run_dir / "companion"), "--altitude", f"{altitude:g}"]
     if not images:
         companion_cmd.append("--no-images")
     t0 = time.monotonic()
@@ -99,6 +99,7 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         "sim_time_s": vehicle_verdict.get("sim_time_s"),
         "wall_time_s": round(wall, 2),
         "start_ned": list(start),
+        "altitude_m": altitude,
         "flow": flow,
         "detector": detector,
         "run_dir": str(run_dir),

@@ -46,8 +46,9 @@ def test_no_centroid_moves_straight_forward():
     ((160, 120), 0.25, 3, None, True),  # centred and large
     ((250, 120), 0.25, 3, None, False),  # large but not centred
     ((160, 120), 0.05, 3, None, False),  # centred but small and far
-    ((160, 120), 0.05, 3, 1.0, True),  # centred, wall measured close
-    ((250, 120), 0.05, 3, 0.7, True),  # the wall this close: push whatever the centring
+    ((160, 120), 0.05, 3, 1.3, True),  # centred, wall measured close
+    ((160, 120), 0.05, 3, 1.6, False),  # centred, wall not yet close
+    ((250, 120), 0.05, 3, 1.0, True),  # the wall this close: push whatever the centring
     ((250, 120), 0.05, 15, None, True),  # step budget (16) spent
 ])
 def test_push_conditions(centroid, area, index, wall, push):

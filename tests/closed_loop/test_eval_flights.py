@@ -1,0 +1,32 @@
+"""The flight evaluation's start draws and its summary arithmetic."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tools.eval_flights import draw_starts, markdown, summarise
+
+
+def test_starts_are_within_the_specified_ranges_and_seeded():
+    starts = draw_starts(np.random.default_rng(4), 200, wall_x=3.0, altitude=1.5)
+    assert starts == draw_starts(np.random.default_rng(4), 200, wall_x=3.0, altitude=1.5)
+    xs = [s[0][0] for s in starts]
+    ys = [s[0][1] for s in starts]
+    alts = [a for _, a in starts]
+    assert min(xs) >= -1.0 and max(xs) <= 1.0  # 2–4 m before a wall at x = 3
+    assert max(abs(y) for y in ys) <= 0.5 and all(1.0 <= a <= 2.0 for a in alts)
+    assert all(s[0][2] == 0.0 for s in starts)  # on the ground
+
+
+def test_summary_counts_and_never_counts_a_touch_as_success():
+    rows = [
+        {"scene": "a", "success": True, "collision": False, "servo_steps": 10, "sim_time_s": 20, "wall_time_s": 9},
+        {"scene": "a", "success": False, "collision": True, "servo_steps": 7, "sim_time_s": 15, "wall_time_s": 8},
+        {"scene": "b", "success": False, "collision": False, "servo_steps": None, "sim_time_s": None,
+         "wall_time_s": 3},
+    ]
+    s = summarise(rows)
+    assert (s["flights"], s["success"], s["collisions"], s["touching_counted_as_success"]) == (3, 1, 1, 0)
+    assert abs(s["success_rate"] - 1 / 3) < 1e-3
+    table = markdown(rows, s)
+    assert "| a | 2 | 1 | 1 |" in table and "**1 (33 %)**" in table
