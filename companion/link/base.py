@@ -1,4 +1,4 @@
-"""The companion's view of an autopilot: one interface, two backends (pymavlink, MAVSDK).
+"""The companion's view of an autopilot: one interface (the pymavlink backend implements it).
 
 Everything the companion knows about the vehicle arrives through this interface, so the same mission
 flies the flowgap SITL vehicle or a real PX4 (or ArduPilot) vehicle. Positions are local NED metres.
@@ -38,15 +38,6 @@ class Endpoint:
         if self.scheme == "serial":
             return self.host
         return f"{self.scheme}:{self.host}:{self.port}"
-
-    @property
-    def mavsdk(self) -> str:
-        """The MAVSDK connection URL."""
-        if self.scheme == "serial":
-            return f"serial://{self.host}:{self.port}"
-        if self.scheme == "tcp":
-            return f"tcpout://{self.host}:{self.port}"
-        return f"{self.scheme}://{self.host}:{self.port}"
 
 
 def parse_endpoint(url: str) -> Endpoint:
