@@ -59,6 +59,7 @@ class MissionConfig:
     arrival_speed_mps: float = 0.15  # ... and below this speed (a steady view for the next frame)
     step_timeout_s: float = 8.0  # wall seconds to reach one servo waypoint
     no_gap_limit: int = 8  # servo steps without any gap ever seen before giving up
+    min_wall_measurements: int = 3  # flow-based wall distances needed before they steer the push
     finish: str = "hold"  # after the traversal: "hold" or "land"
 
 
@@ -179,7 +180,9 @@ class Mission:
                 wall_estimates.append(here + measured)
             # Each measurement places the wall in the world; their median is robust to the bad ones, and
             # the distance ahead follows the vehicle's own motion between measurements.
-            wall_distance = float(np.median(wall_estimates)) - here if wall_estimates else None
+            # A distance enters the push decision only once three measurements agree on a median.
+            enough = len(wall_estimates) >= self.config.min_wall_measurements
+            wall_distance = float(np.median(wall_estimates)) - here if enough else None
             next_step = servo_step(used, area_frac if used is not None else 0.0, k + 1, width, height, cfg,
                                    wall_distance)
             self.result.servo_steps = k + 1
@@ -205,6 +208,8 @@ class Mission:
             if next_step.push:
                 break
         self.result.wall_distance_m = wall_distance
+        if wall_distance is None and wall_estimates:  # fewer than the minimum: still better than nothing
+            wall_distance = float(np.median(wall_estimates)) - self._forward(prev.position)
         return waypoint, step.delta_heading[1:], wall_distance
 
     def _forward(self, position) -> float:

@@ -19,6 +19,8 @@ class ServoConfig:
     """Constants of the servo law; the paper's values where it gives them, ours (measured) elsewhere."""
 
     kappa_y: float = 0.30  # m per unit normalised error (paper)
+    align_error: float = 0.6  # forward step shrinks linearly as max(|e_u|, |e_v|) grows toward this (ours) ...
+    min_forward_frac: float = 0.35  # ... down to this fraction of δ_f: align first when far off-axis (ours)
     kappa_z: float = 0.30  # m per unit normalised error (paper)
     forward_step_m: float = 0.20  # δ_f in the servo phase (paper silent; ours: steps scaled with the measured
                                   # wall distance flew worse, the flow-based distance is poor on short steps)
@@ -71,6 +73,9 @@ def servo_step(centroid: tuple[float, float] | None, area_frac: float, step_inde
     clamp = config.lateral_clamp_close_m if close else config.lateral_clamp_far_m
     dy = float(np.clip(config.kappa_y * e_u, -clamp, clamp))
     dz = float(np.clip(config.kappa_z * e_v, -clamp, clamp))
+    # The lateral step is clamped, so a gap far off-axis is reached only if the forward step waits for it.
+    misalign = max(abs(e_u), abs(e_v))
+    forward *= float(np.clip(1.0 - misalign / config.align_error, config.min_forward_frac, 1.0))
     centred = abs(e_u) <= config.centred_tol and abs(e_v) <= config.centred_tol
     large = area_frac >= config.push_area_frac or (
         wall_distance_m is not None and wall_distance_m <= config.push_distance_m)

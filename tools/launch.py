@@ -53,7 +53,7 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
     api, truth = 14540 + instance, 14560 + instance
     vehicle_result = run_dir / "vehicle_result.json"
     vehicle_cmd = [sys.executable, "-m", "sitl_vehicle", "--scene", scene, "--instance", str(instance),
-                   "--start", ",".join(f"{v:g}" for v in start), "--speed", f"{speed:g}", "--seed", str(seed),
+                   "--start=" + ",".join(f"{v:g}" for v in start), "--speed", f"{speed:g}", "--seed", str(seed),
                    "--result", str(vehicle_result), "--log-level", "WARNING"]
     if no_noise:
         vehicle_cmd.append("--no-noise")

@@ -34,7 +34,9 @@ def test_lateral_step_is_clamped_far_and_close():
     close = servo_step((320, 0), 0.5, 0, W, H, cfg)
     assert far.delta_heading[1:] == (cfg.lateral_clamp_far_m, -cfg.lateral_clamp_far_m)
     assert close.delta_heading[1:] == (cfg.lateral_clamp_close_m, -cfg.lateral_clamp_close_m) and close.close
-    assert far.delta_heading[0] == cfg.forward_step_m
+    # Far off-axis (|e| = 1): the forward step shrinks so the clamped lateral step can catch up.
+    assert far.delta_heading[0] == pytest.approx(cfg.forward_step_m * cfg.min_forward_frac)
+    assert servo_step((160, 120), 0.01, 0, W, H, cfg).delta_heading[0] == cfg.forward_step_m
 
 
 def test_no_centroid_moves_straight_forward():
