@@ -20,7 +20,7 @@ import numpy as np
 from companion.camera import CameraError, FrameSource
 from companion.flow.colour import flow_to_colour
 from companion.link.base import AutopilotLink, LinkError, LinkLost
-from companion.motion import derotate, level_pixel
+from companion.perception import perceive
 from companion.runlog import RunLog
 from companion.servo import (
     ServoConfig,
@@ -139,8 +139,11 @@ class Mission:
         cfg = self.servo
         width, height = self.camera.width, self.camera.height
         prev = self.camera.capture()
-        # The autopilot's attitude estimate at each frame's time stamp, as a real companion would take it.
+        # The autopilot's estimates at each frame's time stamp, as a real companion has them (the frame's own
+        # pose is the simulator's truth, used only to render and to log).
         prev_attitude = self.link.telemetry.attitude_at(prev.time_s)
+        prev_position = self.link.telemetry.position
+        self._log_frame(0, prev, prev_position, prev_attitude)
         self.runlog.save_images(0, rgb=prev.rgb)
         waypoint = start
         step = servo_step(None, 0.0, 0, width, height, cfg)
@@ -159,23 +162,17 @@ class Mission:
                 raise LinkError("the vehicle disarmed during the servo phase (crash or failsafe)")
             frame = self.camera.capture()
             attitude = self.link.telemetry.attitude_at(frame.time_s)
-            t0 = time.perf_counter()
-            flow = self.flow.estimate(prev.rgb, frame.rgb)
-            if self.derotate:
-                flow = derotate(flow, self.camera.K, prev_attitude, attitude)
-            flow_ms = (time.perf_counter() - t0) * 1000
-            t0 = time.perf_counter()
-            detection = self.detector(flow)
-            detect_ms = (time.perf_counter() - t0) * 1000
-            # The servo reads image position as position error: measure it in a level camera (see level_pixel).
-            level = (level_pixel(detection.centroid, self.camera.K, attitude[0], attitude[1])
-                     if detection.centroid is not None else None)
+            position = self.link.telemetry.position
+            seen = perceive(prev.rgb, frame.rgb, prev_attitude, attitude, self.camera.K, self.flow, self.detector,
+                            self.derotate)
+            flow, detection, level = seen.flow, seen.detection, seen.level_centroid
+            self._log_frame(k + 1, frame, position, attitude)
             used = self.tracker.update(level)
             ever_seen |= detection.centroid is not None
             area_frac = detection.area / float(width * height) if detection.centroid is not None else 0.0
-            moved = math.dist(prev.position, frame.position)
+            moved = math.dist(prev_position, position)
             measured = wall_distance_from_flow(flow, detection.mask, moved)
-            here = self._forward(frame.position)
+            here = self._forward(position)
             if measured is not None:
                 wall_estimates.append(here + measured)
             # Each measurement places the wall in the world; their median is robust to the bad ones, and
@@ -190,27 +187,33 @@ class Mission:
                                     mask=detection.mask)
             self.runlog.decision({
                 "step": k + 1, "t_wall_s": time.monotonic() - self._t0, "frame_time_s": frame.time_s,
-                "position_true": frame.position, "waypoint": waypoint, "arrived": arrived,
+                "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
                 "centroid_raw": detection.centroid, "centroid_level": level, "centroid_used": used,
                 "attitude_est": attitude, "accepted": self.tracker.last_accepted,
                 "no_gap_reason": getattr(detection, "reason", None), "area_frac": area_frac,
                 "error": next_step.error, "next_delta_heading": next_step.delta_heading, "close": next_step.close,
                 "push": next_step.push, "wall_distance_m": measured,
-                "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": flow_ms,
-                           "detect_ms": detect_ms},
+                "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": seen.flow_ms,
+                           "detect_ms": seen.detect_ms},
             })
             log.info("step %d: centroid %s used %s area %.3f error %s wall %.2f m%s", k + 1,
                      _fmt(detection.centroid), _fmt(used), area_frac, _fmt(next_step.error),
                      measured if measured is not None else math.nan, " → push" if next_step.push else "")
             if not ever_seen and k + 1 >= self.config.no_gap_limit:
                 raise NoGapError(f"no gap found after {k + 1} frames")
-            prev, prev_attitude, step = frame, attitude, next_step
+            prev, prev_attitude, prev_position, step = frame, attitude, position, next_step
             if next_step.push:
                 break
         self.result.wall_distance_m = wall_distance
         if wall_distance is None and wall_estimates:  # fewer than the minimum: still better than nothing
-            wall_distance = float(np.median(wall_estimates)) - self._forward(prev.position)
+            wall_distance = float(np.median(wall_estimates)) - self._forward(prev_position)
         return waypoint, step.delta_heading[1:], wall_distance
+
+    def _log_frame(self, step: int, frame, position_est, attitude_est) -> None:
+        """What replay needs to re-render and re-perceive this frame (flowgap-tlog replay)."""
+        self.runlog.frame({"step": step, "time_s": frame.time_s, "position_true": frame.position,
+                           "attitude_true": frame.attitude, "position_est": position_est,
+                           "attitude_est": attitude_est})
 
     def _forward(self, position) -> float:
         """Coordinate along the initial heading (the direction of travel toward the wall)."""

@@ -24,7 +24,8 @@ def _jsonable(value):
 
 class RunLog:
     """Layout: ``link.tlog``, ``frames/NNN.png``, ``flow/NNN.png``, ``masks/NNN.png``, ``decisions.jsonl``,
-    ``summary.json``. Image saving can be switched off for evaluation runs (``images=False``)."""
+    ``frames.jsonl`` (each frame's true and estimated pose, for replay), ``summary.json``. Image saving can
+    be switched off for evaluation runs (``images=False``)."""
 
     def __init__(self, run_dir: Path, images: bool = True):
         self.dir = Path(run_dir)
@@ -33,6 +34,7 @@ class RunLog:
         for sub in ("frames", "flow", "masks"):
             (self.dir / sub).mkdir(exist_ok=True)
         self._decisions = open(self.dir / "decisions.jsonl", "w")  # noqa: SIM115 — closed in close()
+        self._frames = open(self.dir / "frames.jsonl", "w")  # noqa: SIM115 — closed in close()
 
     @property
     def tlog_path(self) -> Path:
@@ -53,8 +55,13 @@ class RunLog:
         self._decisions.write(json.dumps(_jsonable(record)) + "\n")
         self._decisions.flush()
 
+    def frame(self, record: dict) -> None:
+        self._frames.write(json.dumps(_jsonable(record)) + "\n")
+        self._frames.flush()
+
     def summary(self, record: dict) -> None:
         (self.dir / "summary.json").write_text(json.dumps(_jsonable(record), indent=2) + "\n")
 
     def close(self) -> None:
         self._decisions.close()
+        self._frames.close()

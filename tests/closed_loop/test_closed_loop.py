@@ -3,6 +3,7 @@ the companion's mission (DIS flow, our parallax detector), judged by the vehicle
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 
@@ -15,6 +16,7 @@ from companion.runlog import RunLog
 from scenes.collision import load_collision
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.sim import VehicleConfig
+from tools.tlog.replay import replay
 
 SCENE = "window1_brick"
 
@@ -44,6 +46,11 @@ def test_closed_loop_flight_through_a_suite_window(vehicle_for_link, tmp_path):
     lines = (tmp_path / "decisions.jsonl").read_text().splitlines()
     assert len(lines) == result.servo_steps
     assert len(list((tmp_path / "masks").glob("*.png"))) == result.servo_steps
+    assert len((tmp_path / "frames.jsonl").read_text().splitlines()) == result.servo_steps + 1
+    # Replaying the run with the flight's own settings reproduces every decision it took.
+    (tmp_path / "summary.json").write_text(json.dumps({"scene": SCENE, "flow": "dis:fine", "detector": "parallax"}))
+    replayed = replay(tmp_path)
+    assert replayed["steps"] == result.servo_steps and replayed["differing_steps"] == []
 
 
 def _run_in_thread(mission):

@@ -8,6 +8,7 @@ import time
 import pytest
 
 from companion.link import LinkError, LinkLost, make_link, parse_endpoint
+from tools.tlog import analyse_tlog
 
 
 @pytest.mark.parametrize("url, mavutil_str", [
@@ -54,7 +55,15 @@ def test_fly_with_the_link_and_keep_streaming_while_busy(vehicle_for_link, tmp_p
         link.wait_for(lambda t: not t.armed, 30, "landing and disarm")
     finally:
         link.close()
-    assert (tmp_path / "link.tlog").stat().st_size > 1000
+    # The link's .tlog of this real loopback flight, read back by flowgap-tlog's analyser.
+    report = analyse_tlog(tmp_path / "link.tlog")
+    m = report.metrics
+    sent = len(link.setpoint_times)
+    assert sent > 40 and m["offboard"]["setpoints"]["count"] == sent
+    assert 15.0 <= m["offboard"]["setpoints"]["rate_hz"] <= 25.0
+    modes = [entry["mode"] for entry in m["modes"]["timeline"]]
+    assert modes[:4] == ["LOITER", "TAKEOFF", "LOITER", "OFFBOARD"] and modes[-1] == "LAND"
+    assert [e["event"] for e in m["arm_events"]] == ["arm", "disarm"]
 
 
 def test_vehicle_disappearing_is_a_clear_link_loss(vehicle_for_link):

@@ -460,9 +460,9 @@ def test_cli_missing_file_and_replay(tmp_path, capsys):
     assert main([str(tmp_path / "nope.tlog")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no such file" in err[0]
-    assert main(["replay", str(tmp_path)]) == 2
+    assert main(["replay", str(tmp_path)]) == 2  # a directory that is not a companion run
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "not available yet" in err[0]
+    assert len(err) == 1 and "summary.json is missing" in err[0]
 
 
 def test_cli_outputs(flight_path, tmp_path, capsys):

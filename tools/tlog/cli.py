@@ -25,12 +25,13 @@ problems in the log (truncation, garbage, CRC failures, unknown ids, no position
 one-line notes on stderr and in metrics.json, never as a traceback.
 
 exit status: 0 analysed; 1 no MAVLink packets in the file (empty / not a tlog; outputs still written);
-2 usage error, missing or unreadable file, or `replay` (not available yet).
+2 usage error, missing or unreadable file (or a run directory replay cannot read).
 
 examples:
   {PROG} flight.tlog                          # summary on stdout
   {PROG} flight.tlog --out report/ --csv      # + report.md, metrics.json, PNGs, csv/<MSG>.csv
   {PROG} run/link.tlog --out r/ --scene window1_brick --truth att_pos_mocap
+  {PROG} replay runs/<time>-window1_brick/companion --flow dis:medium --detector paper
 """
 
 
@@ -39,7 +40,8 @@ def _build_parser() -> argparse.ArgumentParser:
         prog=PROG, formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EPILOG,
         description="Analyse a MAVLink telemetry log (.tlog: 8-byte big-endian µs UNIX time before each "
                     "MAVLink 1/2 packet) from flowgap, PX4 or ArduPilot: what the vehicle did, what it "
-                    f"was told, how well it followed. (`{PROG} replay RUN_DIR` is not available yet.)")
+                    f"was told, how well it followed. `{PROG} replay RUN_DIR` re-runs a companion run's "
+                    "perception with other settings.")
     p.add_argument("tlog", type=Path, help="the .tlog file")
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="write report.md, metrics.json and the plots here (default: summary only)")
@@ -75,9 +77,31 @@ def _setup_logging(verbose: bool) -> None:
 
 
 def _replay(argv: list[str]) -> int:
-    print(f"{PROG}: error: replay is not available yet (it needs the companion's camera and perception, "
-          "which do not exist yet)", file=sys.stderr)
-    return 2
+    from tools.tlog.replay import ReplayError, describe, replay
+
+    p = argparse.ArgumentParser(
+        prog=f"{PROG} replay", description="Re-render a flowgap-companion run at its logged poses and re-run "
+        "perception with other settings; lists the steps where the used centroid differs from the flown one.")
+    p.add_argument("run_dir", type=Path, help="a companion run directory (summary.json, frames.jsonl, ...)")
+    p.add_argument("--flow", help="flow backend to replay with, e.g. dis:medium (default: the flight's)")
+    p.add_argument("--detector", choices=["parallax", "paper"], help="detector (default: the flight's)")
+    p.add_argument("--differ-px", type=float, default=10.0, help="centroid distance that counts as a "
+                   "different decision (default 10)")
+    p.add_argument("--out", type=Path, help="write the replay JSON here (default RUN_DIR/replay.json)")
+    args = p.parse_args(argv)
+    if not args.run_dir.is_dir():
+        print(f"{PROG}: error: {args.run_dir} is not a directory", file=sys.stderr)
+        return 2
+    try:
+        result = replay(args.run_dir, args.flow, args.detector, args.differ_px)
+    except (ReplayError, KeyError, ValueError) as exc:
+        print(f"{PROG}: error: replay: {exc}", file=sys.stderr)
+        return 2
+    out = args.out or args.run_dir / "replay.json"
+    out.write_text(json.dumps(finite_or_none(result), indent=2) + "\n")
+    print(describe(result))
+    print(f"wrote {out}")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,37 @@
+"""One perception step, shared by the mission and by offline replay: flow between two frames, derotated with
+the autopilot's attitude change, the gap detector, and the centroid mapped into a level virtual camera."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.motion import derotate, level_pixel
+
+
+@dataclass(frozen=True)
+class Perception:
+    flow: np.ndarray  # H×W×2, derotated when asked
+    detection: object  # companion.gap.GapDetection
+    level_centroid: tuple[float, float] | None  # the detection's centroid as a level camera would see it
+    flow_ms: float
+    detect_ms: float
+
+
+def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: np.ndarray, flow_backend,
+             detector, derotate_flow: bool = True) -> Perception:
+    """``prev_attitude``/``attitude``: (roll, pitch, yaw) estimates at the two frames' time stamps."""
+    t0 = time.perf_counter()
+    flow = flow_backend.estimate(prev_rgb, rgb)
+    if derotate_flow:
+        flow = derotate(flow, K, prev_attitude, attitude)
+    flow_ms = (time.perf_counter() - t0) * 1000
+    t0 = time.perf_counter()
+    detection = detector(flow)
+    detect_ms = (time.perf_counter() - t0) * 1000
+    # The servo reads image position as position error: measure it in a level camera (see level_pixel).
+    level = (level_pixel(detection.centroid, K, attitude[0], attitude[1])
+             if detection.centroid is not None else None)
+    return Perception(flow, detection, level, flow_ms, detect_ms)

@@ -1,0 +1,101 @@
+"""``flowgap-tlog replay RUN_DIR``: re-run a logged flight's perception with other settings.
+
+The companion logs each frame's true pose (``frames.jsonl``) and each decision (``decisions.jsonl``).
+Replay re-renders the camera at those poses, runs flow → derotation → detector → τ_c filter with the
+chosen backend and detector, and lists the steps where the used centroid differs from the one flown.
+The vehicle's motion is not re-simulated: the replay answers "what would this perception have seen on the
+same path", step by step.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+
+class ReplayError(ValueError):
+    """The run directory cannot be replayed; the message says why."""
+
+
+def _read_jsonl(path: Path) -> list[dict]:
+    if not path.exists():
+        raise ReplayError(f"{path} is missing: is this a flowgap-companion run directory?")
+    rows = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if line.strip():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:
+                raise ReplayError(f"{path}:{n} is not valid JSON (truncated run log?)") from None
+    return rows
+
+
+def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, differ_px: float = 10.0) -> dict:
+    """Replay ``run_dir``; ``flow``/``detector`` default to what the flight used."""
+    from companion.flow.registry import make_flow_backend, parse_backend
+    from companion.gap import get_detector
+    from companion.perception import perceive
+    from companion.tracking import ConfirmingCentroidFilter
+    from scenes import PinholeCamera, Pose, load_scene, render_splats
+
+    summary_path = run_dir / "summary.json"
+    if not summary_path.exists():
+        raise ReplayError(f"{summary_path} is missing: is {run_dir} a flowgap-companion run directory?")
+    summary = json.loads(summary_path.read_text())
+    frames = {f["step"]: f for f in _read_jsonl(run_dir / "frames.jsonl")}
+    decisions = {d["step"]: d for d in _read_jsonl(run_dir / "decisions.jsonl")}
+    if 0 not in frames or len(frames) < 2:
+        raise ReplayError(f"{run_dir / 'frames.jsonl'} holds {len(frames)} frames: nothing to replay")
+    flow_spec = flow or summary["flow"]
+    detector_name = detector or summary["detector"]
+    name, options = parse_backend(flow_spec)
+    backend = make_flow_backend(name, **options)
+    detect = get_detector(detector_name)
+    _, cloud = load_scene(summary["scene"])
+    camera = PinholeCamera()
+    tracker = ConfirmingCentroidFilter()
+
+    def render(step):
+        f = frames[step]
+        return render_splats(cloud, camera, Pose(tuple(f["position_true"]), tuple(f["attitude_true"]))).rgb
+
+    rows, prev = [], render(0)
+    for step in sorted(s for s in frames if s > 0):
+        rgb = render(step)
+        p = perceive(prev, rgb, frames[step - 1]["attitude_est"], frames[step]["attitude_est"], camera.K,
+                     backend, detect)
+        used = tracker.update(p.level_centroid)
+        flown = decisions.get(step, {}).get("centroid_used")
+        if used is None or flown is None:
+            distance = None if used is None and flown is None else math.inf
+        else:
+            distance = math.dist(used, flown)
+        differs = distance is not None and distance > differ_px
+        rows.append({"step": step, "flown_centroid": flown, "replay_centroid": used,
+                     "replay_raw": p.detection.centroid, "distance_px": distance, "differs": differs})
+        prev = rgb
+    return {"run_dir": str(run_dir), "scene": summary["scene"], "flown": {"flow": summary["flow"],
+            "detector": summary["detector"]}, "replay": {"flow": flow_spec, "detector": detector_name},
+            "differ_px": differ_px, "steps": len(rows), "differing_steps": [r["step"] for r in rows if r["differs"]],
+            "rows": rows}
+
+
+def describe(result: dict) -> str:
+    lines = [f"replay of {result['run_dir']} ({result['scene']}): flown with {result['flown']['flow']} + "
+             f"{result['flown']['detector']}, replayed with {result['replay']['flow']} + "
+             f"{result['replay']['detector']}",
+             f"{'step':>4}  {'flown centroid':>16}  {'replayed':>16}  {'Δ px':>6}"]
+
+    def fmt(c):
+        return "none" if c is None else f"({c[0]:.0f}, {c[1]:.0f})"
+
+    for r in result["rows"]:
+        d = r["distance_px"]
+        mark = "  <- differs" if r["differs"] else ""
+        dist = "-" if d is None else ("∞" if math.isinf(d) else f"{d:.1f}")
+        lines.append(f"{r['step']:>4}  {fmt(r['flown_centroid']):>16}  {fmt(r['replay_centroid']):>16}  "
+                     f"{dist:>6}{mark}")
+    lines.append(f"{len(result['differing_steps'])} of {result['steps']} steps differ by more than "
+                 f"{result['differ_px']:g} px")
+    return "\n".join(lines)
