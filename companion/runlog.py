@@ -10,15 +10,18 @@ import cv2
 import numpy as np
 
 
-def _jsonable(value):
+def _jsonable(value, digits: int | None = 5):
+    """JSON-safe copy: non-finite floats → None; floats rounded to ``digits`` (None: full precision)."""
     if isinstance(value, float):
-        return round(value, 5) if math.isfinite(value) else None
+        if not math.isfinite(value):
+            return None
+        return value if digits is None else round(value, digits)
     if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
+        return {k: _jsonable(v, digits) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [_jsonable(v, digits) for v in value]
     if isinstance(value, np.generic):
-        return _jsonable(value.item())
+        return _jsonable(value.item(), digits)
     return value
 
 
@@ -56,7 +59,9 @@ class RunLog:
         self._decisions.flush()
 
     def frame(self, record: dict) -> None:
-        self._frames.write(json.dumps(_jsonable(record)) + "\n")
+        # Full precision: replay re-renders from these poses, and the detector can turn a one-LSB pixel
+        # difference into a different centroid.
+        self._frames.write(json.dumps(_jsonable(record, digits=None)) + "\n")
         self._frames.flush()
 
     def summary(self, record: dict) -> None:

@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander, VehicleStatus
@@ -51,8 +52,6 @@ class ServerConfig:
 
 class VehicleServer:
     def __init__(self, config: ServerConfig, world=None):
-        import numpy as np
-
         self.config = config
         self.scene = config.scene
         self.sim = VehicleSim(config.vehicle, rng=np.random.default_rng(config.seed), world=world,
