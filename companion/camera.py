@@ -94,6 +94,11 @@ class SplatCamera:
         self.width, self.height = self.camera.width, self.camera.height
         self.K = self.camera.K
         self.backend = backend
+        # Render once now: the first call compiles the renderer (seconds on a cold cache), which must not
+        # happen in flight between a frame and the attitude samples it is matched with.
+        from scenes import Pose, render_splats
+
+        render_splats(self.cloud, self.camera, Pose((0.0, 0.0, -1.5), (1.0, 0.0, 0.0, 0.0)), backend=backend)
         self.poses = TruthPoseListener(truth_url)
 
     def capture(self) -> Frame:

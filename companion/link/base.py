@@ -78,7 +78,7 @@ class TelemetryCache:
     position_time: float = -math.inf
     statustexts: list[tuple[int, str]] = field(default_factory=list)
     # (autopilot time s, roll, pitch, yaw): to read the attitude at a camera frame's time stamp
-    attitude_history: deque = field(default_factory=lambda: deque(maxlen=400), repr=False)
+    attitude_history: deque = field(default_factory=lambda: deque(maxlen=2000), repr=False)  # 40 s at 50 Hz
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def attitude_at(self, time_s: float) -> tuple[float, float, float]:
