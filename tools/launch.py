@@ -47,7 +47,8 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 
 def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0, instance: int = 0,
            flow: str = "dis:fine", detector: str = "parallax", seed: int = 0, no_noise: bool = False,
-           timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float = 1.5) -> dict:
+           timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float = 1.5,
+           link: str = "pymavlink") -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     api, truth = 14540 + instance, 14560 + instance
@@ -59,7 +60,8 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         vehicle_cmd.append("--no-noise")
     companion_cmd = [sys.executable, "-m", "companion", "--connect", f"udpin://127.0.0.1:{api}",
                      "--truth", f"udpin://127.0.0.1:{truth}", "--scene", scene, "--flow", flow,
-                     "--detector", detector, "--run-dir", str(run_dir / "companion"), "--altitude", f"{altitude:g}"]
+                     "--detector", detector, "--run-dir", str(run_dir / "companion"), "--altitude", f"{altitude:g}",
+                     "--link", link]
     if not images:
         companion_cmd.append("--no-images")
     t0 = time.monotonic()
@@ -142,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--instance", type=int, default=0, help="port offset, to run several flights at once")
     p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"], help="gap detector")
+    p.add_argument("--link", default="pymavlink", choices=["pymavlink", "mavsdk"], help="companion link backend")
     p.add_argument("--seed", type=int, default=0, help="vehicle sensor-noise seed")
     p.add_argument("--no-noise", action="store_true", help="exact-truth vehicle estimate")
     p.add_argument("--run-dir", type=Path, help="where logs go (default runs/<time>-<scene>)")
@@ -162,7 +165,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     run_dir = args.run_dir or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.scene}"
     verdict = launch(args.scene, run_dir, args.start, args.speed, args.instance, args.flow, args.detector,
-                     args.seed, args.no_noise, args.timeout, log_sink=None if args.quiet else sys.stdout)
+                     args.seed, args.no_noise, args.timeout, log_sink=None if args.quiet else sys.stdout,
+                     link=args.link)
     if args.result:
         args.result.parent.mkdir(parents=True, exist_ok=True)
         args.result.write_text(json.dumps(verdict, indent=2) + "\n")

@@ -1,5 +1,4 @@
-"""Autopilot links: ``make_link("udpin://:14540")``. One backend so far (pymavlink); a MAVSDK backend behind
-the same ``AutopilotLink`` interface is planned (see the README's *Not done*)."""
+"""Autopilot links: ``make_link("udpin://:14540", backend="pymavlink" | "mavsdk")``."""
 
 from __future__ import annotations
 
@@ -7,7 +6,7 @@ from pathlib import Path
 
 from companion.link.base import AutopilotLink, Endpoint, LinkError, LinkLost, TelemetryCache, parse_endpoint
 
-BACKENDS = ("pymavlink",)
+BACKENDS = ("pymavlink", "mavsdk")
 
 
 def make_link(url: str, backend: str = "pymavlink", tlog_path: Path | None = None) -> AutopilotLink:
@@ -15,6 +14,10 @@ def make_link(url: str, backend: str = "pymavlink", tlog_path: Path | None = Non
         from companion.link.pymavlink_link import PymavlinkLink
 
         return PymavlinkLink(url, tlog_path=tlog_path)
+    if backend == "mavsdk":
+        from companion.link.mavsdk_link import MavsdkLink
+
+        return MavsdkLink(url)  # MAVSDK hides the packets: no .tlog from this backend
     raise ValueError(f"unknown link backend {backend!r}; choose one of {BACKENDS}")
 
 

@@ -1,4 +1,4 @@
-"""The companion's view of an autopilot: one interface (the pymavlink backend implements it).
+"""The companion's view of an autopilot: one interface, two backends (pymavlink, MAVSDK).
 
 Everything the companion knows about the vehicle arrives through this interface, so the same mission
 flies the flowgap SITL vehicle or a real PX4 (or ArduPilot) vehicle. Positions are local NED metres.

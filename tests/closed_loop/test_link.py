@@ -88,3 +88,26 @@ def test_refusal_carries_the_autopilots_reason(vehicle_for_link):
         assert math.isinf(-link.telemetry.position_time) is False
     finally:
         link.close()
+
+
+def test_mavsdk_backend_flies_through_the_same_interface(vehicle_for_link):
+    pytest.importorskip("mavsdk")
+    _, port, _ = vehicle_for_link()
+    link = make_link(f"udpin://127.0.0.1:{port}", backend="mavsdk")
+    try:
+        link.connect(timeout_s=15)
+        assert link.telemetry.autopilot == "px4"
+        link.wait_for(lambda t: t.home is not None and t.position is not None and t.landed, 10,
+                      "home, position and landed state")
+        link.arm()
+        link.takeoff(1.2)
+        link.wait_for(lambda t: abs(t.position[2] + 1.2) < 0.05, 15, "takeoff altitude")
+        link.start_offboard((0.0, 0.0, -1.2), 0.0)
+        link.wait_for(lambda t: t.mode == "OFFBOARD", 5, "offboard mode")
+        link.set_position_target((0.5, -0.3, -1.2), 0.0)
+        assert link.wait_position((0.5, -0.3, -1.2), 0.05, 10)
+        assert len(link.telemetry.attitude_history) > 10  # time-stamped attitude for derotation
+        link.land()
+        link.wait_for(lambda t: not t.armed, 30, "landing and disarm")
+    finally:
+        link.close()
