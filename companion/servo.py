@@ -33,7 +33,9 @@ class ServoConfig:
                                   # detection degrades inside ~1 m, where the opening fills the view)
     last_call_distance_m: float = 1.1  # the wall this close: push through whatever the centring (ours)
     centred_tol: float = 0.12  # |e_u|, |e_v| below this counts as centred (ours)
-    step_budget: int = 16  # servo steps before pushing through regardless (paper)
+    step_budget: int = 30  # servo steps before pushing through regardless (paper: 16, standing in for "close"
+                           # with fixed steps; ours shrink while misaligned and closeness is measured, so
+                           # the budget is only a cap: at 16, 12 of 13 failed flights pushed blind from 1–2.6 m)
     push_increment_m: float = 0.05  # forward increment of the final traversal (paper)
     push_margin_m: float = 0.55  # how far past the wall's back face the push ends (ours)
     push_default_m: float = 2.0  # traversal length when the wall distance could not be measured (ours)
