@@ -58,6 +58,8 @@ class MissionConfig:
     arrival_tolerance_m: float = 0.06  # a waypoint is reached within this distance ...
     arrival_speed_mps: float = 0.15  # ... and below this speed (a steady view for the next frame)
     step_timeout_s: float = 8.0  # wall seconds to reach one servo waypoint
+    capture_tilt_rad: float = 0.05  # then wait (≤ settle_timeout_s) until roll and pitch are below this: a
+    settle_timeout_s: float = 1.5   # vehicle still braking is pitched 10°+ (measured), which blurs parallax
     no_gap_limit: int = 8  # servo steps without any gap ever seen before giving up
     min_wall_measurements: int = 3  # flow-based wall distances needed before they steer the push
     finish: str = "hold"  # after the traversal: "hold" or "land"
@@ -157,6 +159,7 @@ class Mission:
             self.link.set_position_target(waypoint, self.yaw)
             arrived = self.link.wait_position(waypoint, self.config.arrival_tolerance_m,
                                               self.config.step_timeout_s, self.config.arrival_speed_mps)
+            self._settle()
             move_s = time.monotonic() - t_step
             if not self.link.telemetry.armed:
                 raise LinkError("the vehicle disarmed during the servo phase (crash or failsafe)")
@@ -213,6 +216,17 @@ class Mission:
         if wall_distance is None and wall_estimates:  # fewer than the minimum: still better than nothing
             wall_distance = float(np.median(wall_estimates)) - self._forward(prev_position)
         return waypoint, step.delta_heading[1:], wall_distance
+
+    def _settle(self) -> None:
+        """Wait for a level attitude before the next frame (bounded: a windy or tilted vehicle still flies)."""
+        tilt = self.config.capture_tilt_rad
+        try:
+            self.link.wait_for(lambda t: abs(t.attitude_euler[0]) < tilt and abs(t.attitude_euler[1]) < tilt,
+                               self.config.settle_timeout_s, "a level attitude")
+        except LinkLost:
+            raise
+        except LinkError:
+            log.debug("still tilted after %.1f s; taking the frame anyway", self.config.settle_timeout_s)
 
     def _log_frame(self, step: int, frame, position_est, attitude_est) -> None:
         """What replay needs to re-render and re-perceive this frame (flowgap-tlog replay)."""
