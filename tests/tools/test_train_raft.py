@@ -1,0 +1,222 @@
+"""RAFT training tooling: rendered data, sequence loss, training, checkpoint/resume, evaluation, CLI errors.
+
+Tiny settings throughout (64×64 images — the smallest RAFT's 4-level correlation pyramid allows —
+RAFT-small, batch 2, 2 iterations) so that the whole file runs in well under a minute on 2 CPU cores.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from tools import train_raft
+from tools.raft_data import VALIDATION_SEED, RenderedFlowDataset, batch_at, validation_set
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = ["--width", "64", "--height", "64", "--batch", "2", "--iters", "2", "--val-iters", "2", "--quiet"]
+
+
+@pytest.fixture(autouse=True)
+def _threads():
+    before = torch.get_num_threads()
+    yield
+    torch.set_num_threads(before)
+
+
+def _read_log(path: Path) -> dict[int, float]:
+    out = {}
+    for line in path.read_text().splitlines():
+        rec = json.loads(line)
+        if "loss" in rec:
+            out[rec["step"]] = rec["loss"]
+    return out
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory) -> Path:
+    """One uninterrupted 4-step run with a checkpoint at step 2."""
+    out = tmp_path_factory.mktemp("run_a")
+    rc = train_raft.main([*TINY, "--steps", "4", "--save-every", "2", "--val-size", "0", "--seed", "3",
+                          "--lr", "1e-3", "--out", str(out)])
+    assert rc == 0
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Data
+# ---------------------------------------------------------------------------------------------------------
+
+def test_dataset_is_deterministic_per_seed_and_differs_across_seeds():
+    a = RenderedFlowDataset(seed=5, width=64, height=64, pairs_per_scene=2, exposure_jitter=0.1)
+    b = RenderedFlowDataset(seed=5, width=64, height=64, pairs_per_scene=2, exposure_jitter=0.1)
+    b.item(0)  # a different cache history must not matter
+    x, y = a.item(3), b.item(3)
+    for key in ("image1", "image2", "flow", "valid"):
+        assert torch.equal(x[key], y[key]), key
+    assert x["image1"].shape == (3, 64, 64) and x["flow"].shape == (2, 64, 64) and x["valid"].shape == (64, 64)
+    assert x["image1"].dtype == torch.float32
+    other = RenderedFlowDataset(seed=6, width=64, height=64, pairs_per_scene=2, exposure_jitter=0.1).item(3)
+    assert not torch.equal(other["image1"], x["image1"])
+    assert not torch.equal(other["flow"], x["flow"])
+    assert not torch.equal(a.item(2)["flow"], x["flow"])  # items of one scene differ too
+    val = validation_set(2, 64, 64)
+    assert val.seed == VALIDATION_SEED and val.exposure_jitter == 0.0
+    assert not torch.equal(val.item(0)["image1"], RenderedFlowDataset(seed=0, width=64, height=64).item(0)["image1"])
+
+
+def test_dataset_flow_is_correct_where_valid():
+    from scenes.groundtruth import warp_backward
+
+    ds = RenderedFlowDataset(seed=1, width=96, height=64, pairs_per_scene=2)
+    warped_err = plain_err = 0.0
+    n_valid = 0
+    for i in range(4):
+        img1, img2, flow, valid = ds.pair(i)
+        assert flow.shape == (64, 96, 2) and valid.dtype == bool
+        assert valid.mean() > 0.2
+        assert np.all(flow[~valid] == 0)
+        warped = warp_backward(img2, flow)
+        warped_err += np.abs(warped - img1)[valid].sum()
+        plain_err += np.abs(img2 - img1)[valid].sum()
+        n_valid += int(valid.sum())
+    assert plain_err / n_valid > 2.0           # the camera really moved
+    assert warped_err < 0.5 * plain_err        # and the flow explains the motion
+
+
+def test_exposure_jitter_changes_brightness_not_flow():
+    plain = RenderedFlowDataset(seed=2, width=64, height=64).item(1)
+    jit = RenderedFlowDataset(seed=2, width=64, height=64, exposure_jitter=0.3).item(1)
+    assert torch.equal(plain["flow"], jit["flow"])
+    assert not torch.equal(plain["image1"], jit["image1"])
+    assert float(jit["image1"].min()) >= 0.0 and float(jit["image1"].max()) <= 255.0
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Loss and optimisation
+# ---------------------------------------------------------------------------------------------------------
+
+def test_sequence_loss_weights_iterations_and_ignores_invalid_pixels():
+    gt = torch.zeros(1, 2, 8, 8)
+    valid = torch.ones(1, 8, 8)
+    valid[0, :, :4] = 0
+    p0 = torch.ones(1, 2, 8, 8)            # off by 1 px per component on every pixel
+    p1 = torch.zeros(1, 2, 8, 8)
+    p1[0, :, :, :4] = 100.0                # wrong only where invalid
+    loss, epe = train_raft.sequence_loss([p0, p1], gt, valid, gamma=0.8)
+    assert float(loss) == pytest.approx(0.8)
+    assert epe == pytest.approx(0.0)
+    loss2, _ = train_raft.sequence_loss([p1, p0], gt, valid, gamma=0.8)
+    assert float(loss2) == pytest.approx(1.0)
+
+
+def test_training_steps_reduce_loss_on_a_fixed_batch():
+    torch.set_num_threads(2)
+    batch = batch_at(RenderedFlowDataset(seed=4, width=64, height=64, pairs_per_scene=2), 0, 2)
+    torch.manual_seed(0)
+    model = train_raft.build_model("small")
+    model.train()
+    opt = torch.optim.AdamW(model.parameters(), lr=1e-3, weight_decay=1e-4)
+    losses = []
+    for _ in range(12):
+        opt.zero_grad()
+        out = model(batch["image1"], batch["image2"], iters=2, all_predictions=True)
+        loss, _ = train_raft.sequence_loss(out.predictions, batch["flow"], batch["valid"])
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        opt.step()
+        losses.append(float(loss.detach()))
+    assert min(losses[-3:]) < 0.7 * losses[0], losses
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Checkpoints, resume, evaluation
+# ---------------------------------------------------------------------------------------------------------
+
+def test_run_writes_loadable_weights_and_checkpoints(trained_run):
+    from companion.flow.registry import make_flow_backend
+
+    assert (trained_run / "checkpoint-000002.pth").is_file()
+    assert (trained_run / "checkpoint-000004.pth").is_file()
+    losses = _read_log(trained_run / "log.jsonl")
+    assert sorted(losses) == [1, 2, 3, 4] and all(math.isfinite(v) for v in losses.values())
+    img = np.zeros((64, 64, 3), np.uint8)
+    for name in ("raft-small-flowgap.pth", "checkpoint-000004.pth"):
+        backend = make_flow_backend("raft", variant="small", weights=trained_run / name, iters=2)
+        assert backend.weights_layout == "flowgap"
+        assert backend.estimate(img, img).shape == (64, 64, 2)
+    final = torch.load(trained_run / "raft-small-flowgap.pth", weights_only=True)["state_dict"]
+    ckpt = torch.load(trained_run / "checkpoint-000004.pth", weights_only=True)
+    assert ckpt["train"]["step"] == 4
+    assert all(torch.equal(final[k], ckpt["state_dict"][k]) for k in final)
+
+
+def test_resume_continues_identically(trained_run, tmp_path):
+    rc = train_raft.main(["--resume", str(trained_run / "checkpoint-000002.pth"), "--out", str(tmp_path),
+                          "--quiet"])
+    assert rc == 0
+    uninterrupted = _read_log(trained_run / "log.jsonl")
+    resumed = _read_log(tmp_path / "log.jsonl")
+    assert sorted(resumed) == [3, 4]
+    assert resumed[3] == uninterrupted[3] and resumed[4] == uninterrupted[4]
+    assert uninterrupted[3] != uninterrupted[1]
+    a = torch.load(trained_run / "raft-small-flowgap.pth", weights_only=True)["state_dict"]
+    b = torch.load(tmp_path / "raft-small-flowgap.pth", weights_only=True)["state_dict"]
+    assert a.keys() == b.keys()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    start = torch.load(trained_run / "checkpoint-000002.pth", weights_only=True)["state_dict"]
+    assert not all(torch.equal(a[k], start[k]) for k in a)   # the resumed steps did train
+
+
+def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
+    rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
+                          "--height", "64", "--val-size", "2", "--val-iters", "2", "--out", str(tmp_path)])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "EPE raft-small" in out and "dis:medium" in out
+    result = json.loads((tmp_path / "eval.json").read_text())
+    assert result["pairs"] == 2 and result["layout"] == "flowgap"
+    assert math.isfinite(result["epe"]) and result["epe"] >= 0
+    assert math.isfinite(result["dis_medium_epe"]) and result["dis_medium_epe"] >= 0
+    assert f"{result['epe']:.3f}" in out
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Command-line errors
+# ---------------------------------------------------------------------------------------------------------
+
+def test_missing_weights_file_is_a_one_line_error_exit_2(tmp_path):
+    missing = tmp_path / "nope.pth"
+    proc = subprocess.run([sys.executable, "-m", "tools.train_raft", "--eval-only", str(missing)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "nope.pth" in lines[0] and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--init", "missing.pth"], "missing.pth"),
+    (["--resume", "missing.pth"], "missing.pth"),
+    (["--width", "60"], "multiples of 8"),
+    (["--width", "48", "--height", "48"], "at least 64"),
+])
+def test_bad_input_is_a_one_line_error(argv, needle, tmp_path, capsys):
+    rc = train_raft.main([*argv, "--out", str(tmp_path), "--quiet"])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+
+
+def test_unrecognised_weights_file_is_a_one_line_error(tmp_path, capsys):
+    bogus = tmp_path / "bogus.pth"
+    torch.save({"something": torch.zeros(2)}, bogus)
+    rc = train_raft.main(["--eval-only", str(bogus), "--out", str(tmp_path)])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bogus.pth" in err[0]

@@ -1,0 +1,464 @@
+"""Train (or evaluate) our RAFT on rendered flow pairs: ``flowgap-train-raft``.
+
+Training: RAFT's sequence loss (L1 on valid pixels of every iteration's upsampled flow, weighted
+``gamma**(iters-1-k)``), AdamW + OneCycleLR (linear anneal, as the RAFT authors), gradient-norm clipping.
+Batch ``t`` (0-based) is always items ``t*batch .. t*batch+batch-1`` of the seeded
+:class:`tools.raft_data.RenderedFlowDataset`, so a run is a function of its settings and ``--resume``
+continues exactly where a checkpoint left off.
+
+Files under ``--out``:
+
+``checkpoint-NNNNNN.pth``
+    Resumable state every ``--save-every`` steps and at the end (the newest ``--keep`` are kept).  It is a
+    flowgap-raft weights file (``{"format": "flowgap-raft", "version", "variant", "state_dict"}``, as
+    written by :func:`companion.flow.raft.weights.save_flowgap_weights`) with one extra ``"train"`` entry
+    (optimizer, scheduler, step, RNG state, settings), so ``make_flow_backend("raft", weights=...)``,
+    ``--init`` and ``--eval-only`` accept it as it is.
+``raft-<variant>-flowgap.pth``
+    The final weights, written by ``save_flowgap_weights``.
+``log.jsonl``
+    One line per step (loss, training EPE, learning rate) and per validation.
+``eval.json``
+    Validation EPE of the final weights (and of DIS medium on the same pairs).
+
+``--eval-only WEIGHTS`` prints the validation EPE of any official / torchvision / flowgap RAFT weights on
+the fixed validation set, with DIS medium's EPE on the same pairs, and writes ``<out>/eval.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from tools.raft_data import (
+    DEFAULT_HEIGHT,
+    DEFAULT_VALIDATION_SIZE,
+    DEFAULT_WIDTH,
+    RenderedFlowDataset,
+    collate,
+    validation_set,
+)
+
+PROG = "flowgap-train-raft"
+TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height",
+              "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters")
+
+
+class CliError(Exception):
+    """A bad input: reported as one line, exit status 2."""
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Loss and metrics
+# ---------------------------------------------------------------------------------------------------------
+
+def sequence_loss(predictions: list[torch.Tensor], flow_gt: torch.Tensor, valid: torch.Tensor,
+                  gamma: float = 0.8, max_flow: float = 400.0) -> tuple[torch.Tensor, float]:
+    """(loss, EPE of the last prediction) over valid pixels; prediction k of n weighted gamma**(n-1-k)."""
+    mag = torch.linalg.vector_norm(flow_gt, dim=1)
+    mask = (valid > 0.5) & (mag < max_flow)
+    maskf = mask.unsqueeze(1).to(flow_gt.dtype)
+    denom = maskf.sum().clamp_min(1.0) * flow_gt.shape[1]
+    n = len(predictions)
+    loss = flow_gt.new_zeros(())
+    for k, pred in enumerate(predictions):
+        loss = loss + gamma ** (n - 1 - k) * ((pred - flow_gt).abs() * maskf).sum() / denom
+    with torch.no_grad():
+        epe = torch.linalg.vector_norm(predictions[-1] - flow_gt, dim=1)[mask]
+        epe_value = float(epe.mean()) if epe.numel() else float("nan")
+    return loss, epe_value
+
+
+def _epe_sum(flow: np.ndarray, gt: np.ndarray, valid: np.ndarray) -> tuple[float, int]:
+    err = np.linalg.norm(flow.astype(np.float64) - gt, axis=-1)[valid]
+    return float(err.sum()), int(err.size)
+
+
+@torch.no_grad()
+def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, device: torch.device,
+             with_dis: bool = False) -> dict:
+    """Validation EPE (mean over all valid pixels of all pairs) of ``model``, optionally of DIS medium."""
+    was_training = model.training
+    model.eval()
+    raft_sum = dis_sum = 0.0
+    count = 0
+    dis = None
+    if with_dis:
+        from companion.flow.registry import make_flow_backend
+
+        dis = make_flow_backend("dis", preset="medium")
+    for i in range(len(dataset)):
+        img1, img2, gt, valid = dataset.pair(i)
+        t1 = torch.from_numpy(img1.transpose(2, 0, 1)).unsqueeze(0).to(device)
+        t2 = torch.from_numpy(img2.transpose(2, 0, 1)).unsqueeze(0).to(device)
+        out = model(t1, t2, iters=iters)
+        flow = out.flow_up[0].permute(1, 2, 0).float().cpu().numpy()
+        s, c = _epe_sum(flow, gt, valid)
+        raft_sum += s
+        count += c
+        if dis is not None:
+            dflow = dis.estimate(np.rint(img1).astype(np.uint8), np.rint(img2).astype(np.uint8))
+            dis_sum += _epe_sum(dflow, gt, valid)[0]
+    model.train(was_training)
+    result = {"pairs": len(dataset), "valid_pixels": count, "width": dataset.width, "height": dataset.height,
+              "iters": iters, "epe": raft_sum / count if count else float("nan")}
+    if dis is not None:
+        result["dis_medium_epe"] = dis_sum / count if count else float("nan")
+    return result
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Model, weights, checkpoints
+# ---------------------------------------------------------------------------------------------------------
+
+def build_model(variant: str):
+    from companion.flow.raft.model import RAFT, RaftConfig
+
+    return RAFT(RaftConfig.for_variant(variant))
+
+
+def load_weights_into(model: torch.nn.Module, path: str | Path, variant: str) -> str:
+    """Load official / torchvision / flowgap weights from ``path`` with the project's loader; layout name."""
+    from companion.flow.base import FlowWeightsError
+    from companion.flow.raft.weights import load_raft_state_dict
+
+    try:
+        layout, found, state = load_raft_state_dict(path)
+    except FlowWeightsError as exc:
+        raise CliError(str(exc)) from None
+    if found != variant:
+        raise CliError(f"{path} holds RAFT-{found} weights, RAFT-{variant} was requested (use --variant {found})")
+    try:
+        model.load_state_dict(state, strict=True)
+    except RuntimeError as exc:
+        raise CliError(f"{path} does not fit RAFT-{variant}: {str(exc).splitlines()[0][:200]}") from None
+    return layout
+
+
+def weights_variant(path: str | Path) -> str:
+    from companion.flow.base import FlowWeightsError
+    from companion.flow.raft.weights import load_raft_state_dict
+
+    try:
+        return load_raft_state_dict(path)[1]
+    except FlowWeightsError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _rng_state() -> dict:
+    state = {"torch": torch.get_rng_state()}
+    if torch.cuda.is_available() and torch.cuda.is_initialized():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: dict) -> None:
+    torch.set_rng_state(state["torch"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+def save_checkpoint(path: Path, model, optimizer, scheduler, step: int, config: dict) -> Path:
+    """A flowgap-raft weights file with the training state under ``"train"`` (see the module docstring)."""
+    from companion.flow.raft.weights import FORMAT_NAME, FORMAT_VERSION
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    obj = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "variant": config["variant"],
+           "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+           "train": {"optimizer": optimizer.state_dict(), "scheduler": scheduler.state_dict(), "step": step,
+                     "rng": _rng_state(), "config": dict(config)}}
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    torch.save(obj, tmp)
+    tmp.replace(path)
+    return path
+
+
+def read_checkpoint(path: str | Path) -> dict:
+    path = Path(path).expanduser()
+    if not path.is_file():
+        raise CliError(f"checkpoint not found: {path}")
+    try:
+        obj = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unreadable file gets the same one-line error
+        raise CliError(f"checkpoint unreadable: {path} ({type(exc).__name__})") from None
+    if not isinstance(obj, dict) or not isinstance(obj.get("train"), dict) or "state_dict" not in obj:
+        raise CliError(f"{path} is not a {PROG} checkpoint (no training state; use --init to start from weights)")
+    return obj
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Training
+# ---------------------------------------------------------------------------------------------------------
+
+def _device(name: str) -> torch.device:
+    try:
+        dev = torch.device(name)
+    except RuntimeError:
+        raise CliError(f"unknown device {name!r} (use cpu or cuda)") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise CliError("--device cuda requested but CUDA is not available")
+    return dev
+
+
+def _log(path: Path, record: dict) -> None:
+    with path.open("a") as f:
+        f.write(json.dumps(record) + "\n")
+
+
+def _prune(out: Path, keep: int) -> None:
+    ckpts = sorted(out.glob("checkpoint-*.pth"))
+    for old in ckpts[:-keep] if keep > 0 else []:
+        old.unlink(missing_ok=True)
+
+
+def train(args: argparse.Namespace) -> dict:
+    device = _device(args.device)
+    config = {k: getattr(args, k) for k in TRAIN_KEYS}
+    resume = read_checkpoint(args.resume) if args.resume else None
+    if resume is not None:
+        stored = resume["train"]["config"]
+        changed = [k for k in TRAIN_KEYS if k in stored and stored[k] != config[k]
+                   and getattr(args, "_explicit", {}).get(k)]
+        if changed:
+            print(f"{PROG}: note: resuming with the checkpoint's settings; ignoring {', '.join(changed)}",
+                  file=sys.stderr)
+        config.update({k: stored[k] for k in TRAIN_KEYS if k in stored})
+
+    out = Path(args.out)
+    if args.init and not resume:
+        weights_variant(args.init)  # fail early with a one-line error
+    dataset = RenderedFlowDataset(seed=config["seed"], length=max(1, config["steps"] * config["batch"]),
+                                  width=config["width"], height=config["height"],
+                                  pairs_per_scene=config["pairs_per_scene"], exposure_jitter=config["jitter"])
+    val = validation_set(config["val_size"], config["width"], config["height"]) if config["val_size"] else None
+
+    torch.manual_seed(config["seed"])
+    model = build_model(config["variant"]).to(device)
+    if resume is not None:
+        model.load_state_dict(resume["state_dict"], strict=True)
+    elif args.init:
+        load_weights_into(model, args.init, config["variant"])
+    model.train()
+    optimizer = torch.optim.AdamW(model.parameters(), lr=config["lr"], weight_decay=config["wdecay"], eps=1e-8)
+    scheduler = torch.optim.lr_scheduler.OneCycleLR(optimizer, max_lr=config["lr"], total_steps=config["steps"] + 100,
+                                                    pct_start=0.05, cycle_momentum=False, anneal_strategy="linear")
+    step = 0
+    if resume is not None:
+        optimizer.load_state_dict(resume["train"]["optimizer"])
+        scheduler.load_state_dict(resume["train"]["scheduler"])
+        step = int(resume["train"]["step"])
+        _set_rng_state(resume["train"]["rng"])
+    out.mkdir(parents=True, exist_ok=True)
+    log_path = out / "log.jsonl"
+
+    from torch.utils.data import DataLoader
+
+    indices = list(range(step * config["batch"], config["steps"] * config["batch"]))
+    loader = DataLoader(dataset, batch_size=config["batch"], sampler=indices, num_workers=args.workers,
+                        collate_fn=collate, drop_last=False, persistent_workers=False,
+                        multiprocessing_context="spawn" if args.workers else None)
+    from tqdm import tqdm
+
+    bar = tqdm(total=config["steps"], initial=step, desc="train", unit="step", disable=args.quiet,
+               dynamic_ncols=True)
+    last_val = float("nan")
+    t0 = time.perf_counter()
+    steps_run = 0
+    for batch in loader:
+        img1, img2 = batch["image1"].to(device), batch["image2"].to(device)
+        flow, valid = batch["flow"].to(device), batch["valid"].to(device)
+        optimizer.zero_grad(set_to_none=True)
+        output = model(img1, img2, iters=config["iters"], all_predictions=True)
+        loss, epe = sequence_loss(output.predictions, flow, valid, config["gamma"], config["max_flow"])
+        loss_value = float(loss.detach())
+        if not math.isfinite(loss_value):
+            bar.close()
+            raise CliError(f"loss became {loss_value} at step {step + 1}; lower --lr")
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), config["clip"])
+        optimizer.step()
+        scheduler.step()
+        step += 1
+        steps_run += 1
+        record = {"step": step, "loss": loss_value, "epe": epe, "lr": scheduler.get_last_lr()[0]}
+        _log(log_path, record)
+        if val is not None and args.val_every and step % args.val_every == 0 and step < config["steps"]:
+            last_val = evaluate(model, val, config["val_iters"], device)["epe"]
+            _log(log_path, {"step": step, "val_epe": last_val})
+        if args.save_every and step % args.save_every == 0 and step < config["steps"]:
+            save_checkpoint(out / f"checkpoint-{step:06d}.pth", model, optimizer, scheduler, step, config)
+            _prune(out, args.keep)
+        bar.set_postfix(loss=f"{loss_value:.3f}", epe=f"{epe:.2f}", val_epe=f"{last_val:.2f}")
+        bar.update(1)
+    bar.close()
+    elapsed = time.perf_counter() - t0
+
+    from companion.flow.raft.weights import save_flowgap_weights
+
+    save_checkpoint(out / f"checkpoint-{step:06d}.pth", model, optimizer, scheduler, step, config)
+    _prune(out, args.keep)
+    final = save_flowgap_weights(model, out / f"raft-{config['variant']}-flowgap.pth", config["variant"])
+    summary = {"weights": str(final), "step": step, "steps_run": steps_run,
+               "seconds_per_step": elapsed / steps_run if steps_run else None}
+    if val is not None:
+        result = evaluate(model, val, config["val_iters"], device, with_dis=True)
+        _log(log_path, {"step": step, "val_epe": result["epe"], "dis_medium_epe": result["dis_medium_epe"]})
+        summary["validation"] = result
+        (out / "eval.json").write_text(json.dumps({"weights": str(final), **result}, indent=2) + "\n")
+    print(f"{PROG}: step {step}/{config['steps']}, "
+          + (f"{summary['seconds_per_step']:.3f} s/step, " if steps_run else "")
+          + (f"validation EPE {summary['validation']['epe']:.3f} px "
+             f"(DIS medium {summary['validation']['dis_medium_epe']:.3f} px), " if val is not None else "")
+          + f"weights {final}")
+    return summary
+
+
+def eval_only(args: argparse.Namespace) -> dict:
+    device = _device(args.device)
+    variant = weights_variant(args.eval_only)
+    model = build_model(variant)
+    layout = load_weights_into(model, args.eval_only, variant)
+    model.to(device).eval()
+    size = args.val_size or DEFAULT_VALIDATION_SIZE
+    result = evaluate(model, validation_set(size, args.width, args.height), args.val_iters, device, with_dis=True)
+    result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, **result}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    print(f"EPE raft-{variant} {result['epe']:.3f} px, dis:medium {result['dis_medium_epe']:.3f} px "
+          f"({result['pairs']} validation pairs, {args.width}x{args.height}, {args.val_iters} iters) "
+          f"-> {out / 'eval.json'}")
+    return result
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Command line
+# ---------------------------------------------------------------------------------------------------------
+
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    pass
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG, formatter_class=_Formatter,
+        description="Train our RAFT / RAFT-small on rendered flowgap scenes with exact ground-truth flow,\n"
+                    "or evaluate weights on the fixed validation set (--eval-only).",
+        epilog="examples:\n"
+               f"  {PROG} --steps 2000 --batch 4 --threads 2 --out runs/raft-train\n"
+               f"  {PROG} --resume runs/raft-train/checkpoint-001000.pth --out runs/raft-train\n"
+               f"  {PROG} --init raft-small.pth --device cuda --batch 16 --steps 20000\n"
+               f"  {PROG} --eval-only companion/flow/weights/raft-small-flowgap.pth\n"
+               "The final weights (<out>/raft-<variant>-flowgap.pth) load with "
+               "make_flow_backend('raft', weights=PATH).")
+    m = p.add_argument_group("mode")
+    m.add_argument("--eval-only", metavar="WEIGHTS",
+                   help="only print (and write <out>/eval.json) the validation EPE of these RAFT weights "
+                        "(official, torchvision or flowgap), with DIS medium's EPE on the same pairs")
+    m.add_argument("--resume", metavar="CHECKPOINT",
+                   help="continue a run from one of its checkpoint-NNNNNN.pth files (its settings win)")
+    m.add_argument("--init", metavar="WEIGHTS",
+                   help="start from official / torchvision / flowgap RAFT weights instead of random ones")
+    t = p.add_argument_group("training")
+    t.add_argument("--variant", choices=("small", "large"), default="small", help="RAFT variant")
+    t.add_argument("--steps", type=int, default=2000, help="total optimiser steps")
+    t.add_argument("--batch", type=int, default=4, help="pairs per step")
+    t.add_argument("--lr", type=float, default=4e-4, help="OneCycle peak learning rate (AdamW)")
+    t.add_argument("--wdecay", type=float, default=1e-4, help="AdamW weight decay")
+    t.add_argument("--clip", type=float, default=1.0, help="gradient-norm clipping")
+    t.add_argument("--gamma", type=float, default=0.8, help="sequence-loss decay over iterations")
+    t.add_argument("--iters", type=int, default=8, help="RAFT refinement iterations while training")
+    t.add_argument("--max-flow", dest="max_flow", type=float, default=400.0,
+                   help="ignore ground-truth flow longer than this (px)")
+    d = p.add_argument_group("data")
+    d.add_argument("--width", type=int, default=DEFAULT_WIDTH, help="image width (multiple of 8)")
+    d.add_argument("--height", type=int, default=DEFAULT_HEIGHT, help="image height (multiple of 8)")
+    d.add_argument("--seed", type=int, default=0, help="training data and initialisation seed")
+    d.add_argument("--jitter", type=float, default=0.1, help="exposure jitter (max relative gain change)")
+    d.add_argument("--pairs-per-scene", dest="pairs_per_scene", type=int, default=8,
+                   help="consecutive pairs rendered from one random scene")
+    d.add_argument("--workers", type=int, default=0, help="DataLoader worker processes")
+    v = p.add_argument_group("validation")
+    v.add_argument("--val-size", dest="val_size", type=int, default=DEFAULT_VALIDATION_SIZE,
+                   help="validation pairs (fixed seed; 0 disables validation while training)")
+    v.add_argument("--val-iters", dest="val_iters", type=int, default=12, help="RAFT iterations for validation")
+    v.add_argument("--val-every", dest="val_every", type=int, default=200,
+                   help="validate every N steps (0: only at the end)")
+    o = p.add_argument_group("output and runtime")
+    o.add_argument("--out", default="runs/raft-train", help="output directory")
+    o.add_argument("--save-every", dest="save_every", type=int, default=200,
+                   help="checkpoint every N steps (0: only at the end)")
+    o.add_argument("--keep", type=int, default=3, help="newest checkpoints to keep")
+    o.add_argument("--device", default="cpu", help="cpu or cuda")
+    o.add_argument("--threads", type=int, default=None, help="torch CPU threads (torch.set_num_threads)")
+    o.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def _check(args: argparse.Namespace) -> None:
+    positive = {"steps": args.steps, "batch": args.batch, "iters": args.iters, "val-iters": args.val_iters,
+                "width": args.width, "height": args.height, "pairs-per-scene": args.pairs_per_scene,
+                "keep": args.keep}
+    for name, value in positive.items():
+        if value <= 0:
+            raise CliError(f"--{name} must be positive (got {value})")
+    for name, value in {"val-size": args.val_size, "val-every": args.val_every, "save-every": args.save_every,
+                        "workers": args.workers}.items():
+        if value < 0:
+            raise CliError(f"--{name} must be >= 0 (got {value})")
+    if args.width % 8 or args.height % 8:
+        raise CliError(f"--width and --height must be multiples of 8 (got {args.width}x{args.height})")
+    if min(args.width, args.height) < 64:
+        raise CliError(f"--width and --height must be at least 64 (RAFT's 4-level correlation pyramid needs "
+                       f"1/8-resolution features of at least 8 cells; got {args.width}x{args.height})")
+    if not 0.0 <= args.jitter < 1.0:
+        raise CliError(f"--jitter must be in [0, 1) (got {args.jitter})")
+    if not (args.lr > 0 and math.isfinite(args.lr)):
+        raise CliError(f"--lr must be positive (got {args.lr})")
+    if not 0.0 < args.gamma <= 1.0:
+        raise CliError(f"--gamma must be in (0, 1] (got {args.gamma})")
+    if args.clip <= 0:
+        raise CliError(f"--clip must be positive (got {args.clip})")
+    if args.threads is not None and args.threads <= 0:
+        raise CliError(f"--threads must be positive (got {args.threads})")
+    if args.eval_only and (args.resume or args.init):
+        raise CliError("--eval-only cannot be combined with --resume or --init")
+    if args.resume and args.init:
+        raise CliError("--resume and --init are exclusive (a resumed run already has its weights)")
+    for flag, path in (("--eval-only", args.eval_only), ("--init", args.init), ("--resume", args.resume)):
+        if path and not Path(path).expanduser().is_file():
+            raise CliError(f"{flag}: file not found: {path}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(argv)
+    defaults = parser.parse_args([])
+    args._explicit = {k: getattr(args, k) != getattr(defaults, k) for k in TRAIN_KEYS}
+    try:
+        _check(args)
+        if args.threads is not None:
+            torch.set_num_threads(args.threads)
+        if args.eval_only:
+            eval_only(args)
+        else:
+            train(args)
+    except CliError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted (resume from the newest checkpoint in {args.out})", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
