@@ -220,12 +220,8 @@ class Mission:
     def _settle(self) -> None:
         """Wait for a level attitude before the next frame (bounded: a windy or tilted vehicle still flies)."""
         tilt = self.config.capture_tilt_rad
-        try:
-            self.link.wait_for(lambda t: abs(t.attitude_euler[0]) < tilt and abs(t.attitude_euler[1]) < tilt,
-                               self.config.settle_timeout_s, "a level attitude")
-        except LinkLost:
-            raise
-        except LinkError:
+        if not self.link.try_wait_for(lambda t: abs(t.attitude_euler[0]) < tilt and abs(t.attitude_euler[1]) < tilt,
+                                      self.config.settle_timeout_s, "a level attitude"):
             log.debug("still tilted after %.1f s; taking the frame anyway", self.config.settle_timeout_s)
 
     def _log_frame(self, step: int, frame, position_est, attitude_est) -> None:

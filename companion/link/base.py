@@ -164,15 +164,19 @@ class AutopilotLink(abc.ABC):
             time.sleep(period_s)
         raise LinkError(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
-    def wait_position(self, target, tolerance_m: float, timeout_s: float, speed_mps: float = 0.1) -> bool:
-        """Wait until the vehicle is within ``tolerance_m`` of ``target`` and slower than ``speed_mps``."""
-        def arrived(t: TelemetryCache) -> bool:
-            return (t.position is not None and math.dist(t.position, target) <= tolerance_m
-                    and math.hypot(*t.velocity) <= speed_mps)
+    def try_wait_for(self, predicate, timeout_s: float, what: str) -> bool:
+        """``wait_for`` that answers False on a timeout; a lost link still raises LinkLost."""
         try:
-            self.wait_for(arrived, timeout_s, f"arrival at {target}")
+            self.wait_for(predicate, timeout_s, what)
             return True
         except LinkLost:
             raise
         except LinkError:
             return False
+
+    def wait_position(self, target, tolerance_m: float, timeout_s: float, speed_mps: float = 0.1) -> bool:
+        """Wait until the vehicle is within ``tolerance_m`` of ``target`` and slower than ``speed_mps``."""
+        def arrived(t: TelemetryCache) -> bool:
+            return (t.position is not None and math.dist(t.position, target) <= tolerance_m
+                    and math.hypot(*t.velocity) <= speed_mps)
+        return self.try_wait_for(arrived, timeout_s, f"arrival at {target}")
