@@ -198,7 +198,7 @@ class Mission:
                 "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
                 "centroid_raw": detection.centroid, "centroid_level": level, "centroid_used": used,
                 "attitude_est": attitude, "accepted": self.tracker.last_accepted,
-                "no_gap_reason": getattr(detection, "reason", None), "area_frac": area_frac,
+                "no_gap_reason": detection.reason, "area_frac": area_frac,
                 "error": next_step.error, "next_delta_heading": next_step.delta_heading, "close": next_step.close,
                 "push": next_step.push, "wall_distance_m": measured,
                 "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": seen.flow_ms,

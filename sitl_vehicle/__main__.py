@@ -37,7 +37,8 @@ class CliError(Exception):
     """Bad command-line input; printed as one line."""
 
 
-def _triple(text: str) -> tuple[float, float, float]:
+def triple_arg(text: str) -> tuple[float, float, float]:
+    """argparse type for X,Y,Z (also used by flowgap-sitl): three finite comma-separated numbers."""
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
@@ -73,13 +74,13 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--speed", type=float, default=1.0, help="simulation seconds per wall second (default 1)")
     sim.add_argument("--no-noise", action="store_true", help="exact-truth sensors and estimate (for tests)")
     sim.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
-    sim.add_argument("--start", type=_triple, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
+    sim.add_argument("--start", type=triple_arg, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
                      help="start position NED in metres (default 0,0,0: on the ground at the origin)")
     sim.add_argument("--yaw", type=float, default=0.0, help="start heading in degrees (default 0: north)")
     sim.add_argument("--scene", help="scene name or path: load its collision geometry (default: ground only)")
     sim.add_argument("--duration", type=float, help="stop after this many simulation seconds")
     sim.add_argument("--result", type=Path, help="write the ground-truth verdict JSON here at exit")
-    sim.add_argument("--home", type=_triple, default=None, metavar="LAT,LON,ALT",
+    sim.add_argument("--home", type=triple_arg, default=None, metavar="LAT,LON,ALT",
                      help="home position (default PX4 SITL's 47.397742,8.545594,488)")
     sim.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE",
                      help="set a PX4 parameter at boot (repeatable); known: "

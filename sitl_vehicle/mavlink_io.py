@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander, Reply, VehicleStatus
-from sitl_vehicle.modes import FlightMode, UnsupportedMode, decode_custom_mode, mode_from_custom
+from sitl_vehicle.modes import FlightMode, UnsupportedMode, mode_from_custom
 from sitl_vehicle.params import ParameterError, ParameterStore
 from sitl_vehicle.sim import Setpoint
 
@@ -597,10 +597,3 @@ def truth_odometry(time_s: float, position, attitude, velocity_ned, angular_velo
         *position, list(attitude), *velocity_ned, *angular_velocity,
         [math.nan] + [0.0] * 20, [math.nan] + [0.0] * 20, 0, mavlink.MAV_ESTIMATOR_TYPE_MOCAP, 100)
 
-
-def decode_mode_name(custom_mode: int) -> str:
-    main, sub = decode_custom_mode(custom_mode)
-    try:
-        return mode_from_custom(main, sub).label
-    except UnsupportedMode:
-        return f"main={main} sub={sub}"

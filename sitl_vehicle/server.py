@@ -102,7 +102,7 @@ class VehicleServer:
         est = self.sim.estimate
         return VehicleStatus(time_s=self.sim.time_s, position=est.position, velocity=est.velocity,
                              yaw=est.euler()[2], armed=self.sim.armed, landed=self.sim.landed,
-                             crashed=self.sim.crashed, position_valid=getattr(self.sim, "estimate_valid", True))
+                             crashed=self.sim.crashed, position_valid=self.sim.estimate_valid)
 
     def telemetry(self) -> Telemetry:
         est = self.sim.estimate
@@ -116,14 +116,14 @@ class VehicleServer:
     def verdict(self) -> dict:
         sim = self.sim
         collision = bool(sim.crashed)
-        crossed = bool(getattr(sim, "crossed_wall", False))
+        crossed = sim.crossed_wall
         return {
             "scene": self.scene,
             "success": crossed and not collision,
             "collision": collision,
             "crash_reason": sim.crash_reason,
             "crossed_wall": crossed,
-            "min_clearance_m": _json_float(getattr(sim, "min_clearance_m", math.inf)),
+            "min_clearance_m": _json_float(sim.min_clearance_m),
             "sim_time_s": round(sim.time_s, 4),
             "wall_time_s": round(self.wall_time_s, 3),
             "final_position_ned": [round(v, 4) for v in sim.truth.position],
@@ -152,7 +152,7 @@ class VehicleServer:
             self._announced_crash = True
             log.warning("collision: %s", sim.crash_reason)
             self.interface.statustext(mavlink.MAV_SEVERITY_EMERGENCY, f"Collision: {sim.crash_reason}")
-        if getattr(sim, "crossed_wall", False) and not self._announced_crossing:
+        if sim.crossed_wall and not self._announced_crossing:
             self._announced_crossing = True
             log.info("wall crossed at t=%.2f s", sim.time_s)
             self.interface.statustext(mavlink.MAV_SEVERITY_NOTICE, "Ground truth: wall plane crossed")

@@ -18,6 +18,8 @@ import threading
 import time
 from pathlib import Path
 
+from sitl_vehicle.__main__ import triple_arg
+
 log = logging.getLogger("flowgap-sitl")
 
 
@@ -121,24 +123,13 @@ def describe(v: dict) -> str:
     return f"FAILED: {v['scene']}: {why}"
 
 
-def _triple(text: str) -> tuple[float, float, float]:
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"{text!r} must be three comma-separated numbers, e.g. 0,0.3,0")
-    return values  # type: ignore[return-value]
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="flowgap-sitl", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="example: flowgap-sitl --scene window2_stone --start 0,0.3,0 "
                                        "--result runs/verdict.json")
     p.add_argument("--scene", default="window1_brick", help="suite scene name or spec path (default %(default)s)")
-    p.add_argument("--start", type=_triple, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
+    p.add_argument("--start", type=triple_arg, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
                    help="vehicle start position NED (default 0,0,0: on the ground, 3 m before the wall)")
     p.add_argument("--speed", type=float, default=2.0, help="simulation speed-up (default 2)")
     p.add_argument("--instance", type=int, default=0, help="port offset, to run several flights at once")

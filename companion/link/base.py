@@ -100,12 +100,6 @@ class TelemetryCache:
         yaw_step = math.remainder(a1[2] - a0[2], math.tau)  # interpolate yaw across ±π
         return (a0[0] + w * (a1[0] - a0[0]), a0[1] + w * (a1[1] - a0[1]), a0[2] + w * yaw_step)
 
-    def snapshot(self) -> TelemetryCache:
-        with self.lock:
-            return TelemetryCache(self.position, self.velocity, self.attitude_euler, self.mode, self.armed,
-                                  self.landed, self.home, self.autopilot, self.last_heartbeat,
-                                  self.position_time, list(self.statustexts))
-
 
 class AutopilotLink(abc.ABC):
     """Connect, arm, take off, fly offboard position setpoints, land — for any MAVLink autopilot."""
