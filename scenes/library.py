@@ -8,7 +8,7 @@ wall's: appearance cannot tell them apart, only parallax can.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -79,9 +79,13 @@ def random_opening(rng: np.random.Generator) -> OpeningSpec:
     return OpeningSpec("polygon", vertices=tuple((float(a), float(b)) for a, b in verts), frame_width=frame)
 
 
-def random_scene(rng: np.random.Generator) -> SceneSpec:
-    """A random wall-with-opening scene for training and Monte-Carlo flights (all draws from ``rng``)."""
-    texture = str(rng.choice(TEXTURES))
+def random_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES) -> SceneSpec:
+    """A random wall-with-opening scene for training and Monte-Carlo flights (all draws from ``rng``).
+
+    ``textures``: the families to draw from (the suite's four by default; RAFT training adds
+    ``scenes.spec.EXTRA_TEXTURES``).
+    """
+    texture = str(rng.choice(list(textures)))
     seed = int(rng.integers(0, 2**31 - 1))
     distance = float(rng.uniform(2.5, 4.0))
     wall = WallSpec(distance=distance, width=float(rng.uniform(6.5, 8.0)), height=4.0,

@@ -16,7 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 SPEC_VERSION = 1
-TEXTURES = ("brick", "granite", "newspaper", "stone")
+TEXTURES = ("brick", "granite", "newspaper", "stone")          # the four families of the suite
+EXTRA_TEXTURES = ("plaster", "tiles")                          # weak and repetitive texture, for training data
+ALL_TEXTURES = TEXTURES + EXTRA_TEXTURES
 SHAPES = ("rect", "ellipse", "polygon")
 ELLIPSE_SEGMENTS = 64
 
@@ -131,8 +133,8 @@ class SceneSpec:
             raise SpecError(f"scene spec version {self.version} is not supported; re-save it as version "
                             f"{SPEC_VERSION}")
         for tex in (self.wall.texture, self.background_texture):
-            if tex not in TEXTURES:
-                raise SpecError(f"unknown texture {tex!r}; use one of {TEXTURES}")
+            if tex not in ALL_TEXTURES:
+                raise SpecError(f"unknown texture {tex!r}; use one of {ALL_TEXTURES}")
         if self.wall.thickness <= 0 or self.wall.width <= 0 or self.wall.height <= 0:
             raise SpecError("wall width, height and thickness must be positive; fix the 'wall' block")
         y_lo, y_hi = self.wall.center_y - self.wall.width / 2, self.wall.center_y + self.wall.width / 2

@@ -150,7 +150,33 @@ def stone(rng: np.random.Generator, h: int, w: int, ppm: float, scale: float = 1
     return img
 
 
-GENERATORS = {"brick": brick, "granite": granite, "newspaper": newspaper, "stone": stone}
+def plaster(rng: np.random.Generator, h: int, w: int, ppm: float, scale: float = 1.0) -> np.ndarray:
+    """Painted stucco: weak, low-contrast texture (a hard case for flow; training data only)."""
+    base = np.array(rng.uniform(0.6, 0.85, 3), np.float32)
+    img = np.broadcast_to(base, (h, w, 3)).copy()
+    img *= (1 + 0.06 * _fbm(rng, h, w, 0.25 * ppm * scale, 4))[..., None]
+    bumps = _noise(rng, h, w, max(1.5, 0.008 * ppm * scale))
+    img *= (1 + 0.05 * np.clip(bumps, -1, 1))[..., None]
+    img += 0.015 * rng.standard_normal((h, w, 1)).astype(np.float32)
+    return img
+
+
+def tiles(rng: np.random.Generator, h: int, w: int, ppm: float, scale: float = 1.0) -> np.ndarray:
+    """Square ceramic tiles with grout: a repetitive pattern (aperture/ambiguity case; training data only)."""
+    size, grout = float(rng.uniform(0.1, 0.3)) * scale * ppm, max(1.0, 0.006 * scale * ppm)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    row = np.floor(yy / (size + grout)).astype(np.int64)
+    col = np.floor(xx / (size + grout)).astype(np.int64)
+    is_grout = (yy - row * (size + grout) >= size) | (xx - col * (size + grout) >= size)
+    base = np.array(rng.uniform(0.3, 0.9, 3), np.float32)
+    per = base * (1 + 0.06 * rng.standard_normal((int(row.max()) + 1, int(col.max()) + 1, 1)).astype(np.float32))
+    img = per[row, col] * (1 + 0.05 * _fbm(rng, h, w, 0.1 * ppm * scale, 2))[..., None]
+    img = np.where(is_grout[..., None], np.array([0.45, 0.44, 0.42], np.float32), img)
+    return img + 0.02 * rng.standard_normal((h, w, 1)).astype(np.float32)
+
+
+GENERATORS = {"brick": brick, "granite": granite, "newspaper": newspaper, "stone": stone, "plaster": plaster,
+              "tiles": tiles}
 
 
 def make_texture(kind: str, seed: int, width_m: float, height_m: float, px_per_m: float = DEFAULT_PX_PER_M,

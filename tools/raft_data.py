@@ -2,7 +2,8 @@
 
 Item ``i`` of a :class:`RenderedFlowDataset` with seed ``s`` is a pure function of ``(s, i)`` and the
 dataset's settings (resolution, pairs per scene, jitter): the scene comes from
-``scenes.random_scene(default_rng([s, i // pairs_per_scene, 0]))``, the pose pair from
+``scenes.random_scene(default_rng([s, i // pairs_per_scene, 0]), ALL_TEXTURES)`` (the suite's four texture
+families plus weak "plaster" and repetitive "tiles"), the pose pair from
 ``scenes.groundtruth.sample_pose_pair(spec, default_rng([s, i, 1]))`` and the exposure jitter from
 ``default_rng([s, i, 2])``.  Consecutive items share a scene (``pairs_per_scene``), and built scenes are
 kept in a small per-process (hence per-DataLoader-worker) cache, so a pair costs two renders (~25 ms at
@@ -89,8 +90,9 @@ class RenderedFlowDataset(Dataset):
             return hit
         from scenes.build import build_scene
         from scenes.library import random_scene
+        from scenes.spec import ALL_TEXTURES
 
-        spec = random_scene(np.random.default_rng([self.seed, scene_index, 0]))
+        spec = random_scene(np.random.default_rng([self.seed, scene_index, 0]), ALL_TEXTURES)
         entry = (spec, build_scene(spec))
         self._scenes[scene_index] = entry
         while len(self._scenes) > self.scene_cache:

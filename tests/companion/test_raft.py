@@ -161,10 +161,9 @@ def _one_line_error(match: str, **options):
     return msg
 
 
-def test_missing_default_weights_say_so(tmp_path):
-    msg = _one_line_error("raft-small-flowgap.pth")
+def test_missing_weights_say_so(tmp_path):
+    msg = _one_line_error("nope.pth", weights=tmp_path / "nope.pth")
     assert "not found" in msg and "official RAFT" in msg and "torchvision" in msg
-    _one_line_error(str(tmp_path / "nope.pth"), weights=tmp_path / "nope.pth")
 
 
 def test_mismatched_weights_are_rejected(tmp_path):
@@ -199,6 +198,15 @@ def test_output_shape_and_padding(h, w):
     assert torch.equal(padder.unpad(padded), x)
     left, right, top, bottom = padder.padding
     assert abs(left - right) <= 1 and abs(top - bottom) <= 1
+
+
+@pytest.mark.parametrize("h, w", [(48, 100), (100, 56), (20, 20)])
+def test_frames_too_small_for_the_pyramid_are_a_one_line_error(h, w):
+    backend = make_flow_backend("raft", random_init_seed=1, iters=1)
+    img1, img2 = textured_pair(h, w, (1.0, 0.5))
+    with pytest.raises(ValueError, match="at least 64×64") as info:
+        backend.estimate(img1, img2)
+    assert "\n" not in str(info.value) and f"{w}×{h}" in str(info.value)
 
 
 def test_model_rejects_unpadded_input():

@@ -59,6 +59,20 @@ def test_random_scene_is_deterministic():
     assert SceneSpec.from_json(a.to_json()) == a
 
 
+def test_random_scene_texture_families():
+    """The suite's four families by default; training scenes also draw the extra ones, which specs accept."""
+    from scenes.spec import ALL_TEXTURES, EXTRA_TEXTURES, TEXTURES
+
+    default = {random_scene(np.random.default_rng(s)).wall.texture for s in range(60)}
+    assert default == set(TEXTURES)
+    specs = [random_scene(np.random.default_rng(s), ALL_TEXTURES) for s in range(60)]
+    assert {s.wall.texture for s in specs} == set(ALL_TEXTURES)
+    extra = next(s for s in specs if s.wall.texture in EXTRA_TEXTURES)
+    assert SceneSpec.from_json(extra.to_json()).validate() == extra
+    with pytest.raises(SpecError, match="unknown texture 'marble'"):
+        dataclasses.replace(extra, wall=dataclasses.replace(extra.wall, texture="marble")).validate()
+
+
 def test_background_scale_matches_apparent_size():
     spec = suite_spec("window1", "stone")
     assert spec.background_texture == "stone"

@@ -1,10 +1,11 @@
 import numpy as np
 import pytest
 
+from scenes.spec import ALL_TEXTURES
 from scenes.textures import make_texture
 
 
-@pytest.mark.parametrize("kind", ["brick", "granite", "newspaper", "stone"])
+@pytest.mark.parametrize("kind", ALL_TEXTURES)
 def test_texture_deterministic_per_seed(kind):
     a = make_texture(kind, 3, 1.0, 0.8, px_per_m=100)
     b = make_texture(kind, 3, 1.0, 0.8, px_per_m=100)
@@ -13,7 +14,7 @@ def test_texture_deterministic_per_seed(kind):
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
     assert 0.0 <= a.min() and a.max() <= 1.0
-    assert a.std() > 0.03  # textured, not flat
+    assert a.std() > 0.02  # textured, not flat (plaster is deliberately weak)
 
 
 def test_unknown_texture():

@@ -18,6 +18,9 @@ log = logging.getLogger(__name__)
 
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "raft-small-flowgap.pth"
+# The 4-level correlation pyramid halves the 1/8-resolution feature map three times, so a frame (after
+# padding to multiples of 8) must be at least 8 × 8 = 64 pixels on each side.
+MIN_SIDE = 64
 
 
 def forward_interpolate(flow_low: torch.Tensor) -> torch.Tensor:
@@ -107,6 +110,9 @@ class RaftBackend:
         """H×W×2 float32 flow.  ``flow_init``: a full-resolution initial flow (e.g. the previous result)."""
         h, w = check_pair(img1, img2)
         padder = InputPadder((h, w), mode=self.padding_mode)
+        if min(padder.padded_size) < MIN_SIDE:
+            raise ValueError(f"RAFT needs frames of at least {MIN_SIDE}×{MIN_SIDE} pixels (its correlation pyramid "
+                             f"has 4 levels at 1/8 resolution); got {w}×{h}: use a larger camera or the dis backend")
         t1, t2 = padder.pad(self._to_tensor(img1), self._to_tensor(img2))
         ph, pw = padder.padded_size
         init = None
