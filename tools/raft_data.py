@@ -5,9 +5,14 @@ dataset's settings (resolution, pairs per scene, jitter): the scene comes from
 ``scenes.random_scene(default_rng([s, i // pairs_per_scene, 0]), ALL_TEXTURES)`` (the suite's four texture
 families plus weak "plaster" and repetitive "tiles"), the pose pair from
 ``scenes.groundtruth.sample_pose_pair(spec, default_rng([s, i, 1]))`` and the exposure jitter from
-``default_rng([s, i, 2])``.  Consecutive items share a scene (``pairs_per_scene``), and built scenes are
-kept in a small per-process (hence per-DataLoader-worker) cache, so a pair costs two renders (~25 ms at
-160×120) rather than a scene build (~0.15 s).
+``default_rng([s, i, 2])``, and the crop window (when ``crop`` is set) from ``default_rng([s, i, 3])``.
+Consecutive items share a scene (``pairs_per_scene``), and built scenes are kept in a small per-process
+(hence per-DataLoader-worker) cache, so a pair costs two renders (~35 ms at 320×240) rather than a scene
+build (~0.15 s).
+
+Training renders at the flight camera's resolution (320×240, so textures and flow magnitudes look as they do
+in flight) and crops a random 160×120 window of both frames, which keeps a training step cheap on a CPU
+(RAFT is trained on crops for the same reason); the validation set is full 320×240 frames.
 
 Each item is a dict of tensors: ``image1``/``image2`` 3×H×W float32 RGB in 0..255, ``flow`` 2×H×W float32
 (forward flow 1 -> 2, pixels; 0 where not valid), ``valid`` H×W float32 (1 where the flow is exact and unoccluded).
@@ -24,8 +29,9 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-DEFAULT_WIDTH = 160
-DEFAULT_HEIGHT = 120
+DEFAULT_WIDTH = 320                 # the companion's camera (scenes.camera.PinholeCamera)
+DEFAULT_HEIGHT = 240
+DEFAULT_CROP = (160, 120)           # training crop (width, height)
 VALIDATION_SEED = 1_000_003
 DEFAULT_VALIDATION_SIZE = 32
 
@@ -38,14 +44,21 @@ class RenderedFlowDataset(Dataset):
     ``exposure_jitter`` the maximum relative gain change per image (0 disables; the two images of a pair
     get independent gains and offsets, as an auto-exposing camera would), ``max_step`` / ``max_turn_rad``
     the per-axis translation (m) and rotation (rad) bounds between the two poses, ``scene_cache`` how many
-    built scenes to keep per process.
+    built scenes to keep per process, ``crop`` an optional (width, height) window cut at a random place
+    from both rendered frames (items are then crop-sized).
     """
 
     def __init__(self, seed: int = 0, length: int = 100_000, width: int = DEFAULT_WIDTH,
                  height: int = DEFAULT_HEIGHT, pairs_per_scene: int = 8, exposure_jitter: float = 0.0,
-                 max_step: float = 0.15, max_turn_rad: float = 0.05, scene_cache: int = 4) -> None:
+                 max_step: float = 0.15, max_turn_rad: float = 0.05, scene_cache: int = 4,
+                 crop: tuple[int, int] | None = None) -> None:
         if width <= 0 or height <= 0 or width % 8 or height % 8:
             raise ValueError(f"image size must be positive multiples of 8 (got {width}x{height})")
+        if crop is not None:
+            cw, ch = (int(v) for v in crop)
+            if cw <= 0 or ch <= 0 or cw % 8 or ch % 8 or cw > width or ch > height:
+                raise ValueError(f"crop must be positive multiples of 8 within {width}x{height} (got {cw}x{ch})")
+            crop = (cw, ch)
         if length <= 0:
             raise ValueError("length must be positive")
         if pairs_per_scene <= 0:
@@ -60,6 +73,7 @@ class RenderedFlowDataset(Dataset):
         self.max_step = float(max_step)
         self.max_turn_rad = float(max_turn_rad)
         self.scene_cache = max(1, int(scene_cache))
+        self.crop = crop
         self._scenes: OrderedDict[int, tuple] = OrderedDict()
         self._camera = None
 
@@ -124,7 +138,15 @@ class RenderedFlowDataset(Dataset):
             img1 = np.clip(img1 * gains[0] + offsets[0], 0.0, 255.0)
             img2 = np.clip(img2 * gains[1] + offsets[1], 0.0, 255.0)
         img1, img2 = img1.astype(np.float32), img2.astype(np.float32)
-        return img1, img2, flow.astype(np.float32), valid.astype(bool)
+        if self.crop is not None:
+            cw, ch = self.crop
+            rng = np.random.default_rng([self.seed, index, 3])
+            x0 = int(rng.integers(0, self.width - cw + 1))
+            y0 = int(rng.integers(0, self.height - ch + 1))
+            win = (slice(y0, y0 + ch), slice(x0, x0 + cw))
+            img1, img2, flow, valid = img1[win], img2[win], flow[win], valid[win]
+        return (np.ascontiguousarray(img1), np.ascontiguousarray(img2), np.ascontiguousarray(flow, np.float32),
+                np.ascontiguousarray(valid, bool))
 
     def item(self, index: int) -> dict[str, torch.Tensor]:
         img1, img2, flow, valid = self.pair(index)

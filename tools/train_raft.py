@@ -38,6 +38,7 @@ import numpy as np
 import torch
 
 from tools.raft_data import (
+    DEFAULT_CROP,
     DEFAULT_HEIGHT,
     DEFAULT_VALIDATION_SIZE,
     DEFAULT_WIDTH,
@@ -47,7 +48,7 @@ from tools.raft_data import (
 )
 
 PROG = "flowgap-train-raft"
-TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height",
+TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height", "crop",
               "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters")
 
 
@@ -197,6 +198,17 @@ def read_checkpoint(path: str | Path) -> dict:
 # Training
 # ---------------------------------------------------------------------------------------------------------
 
+def parse_crop(text: str) -> tuple[int, int] | None:
+    """'160x120' -> (160, 120); 'none' -> None (train on whole frames)."""
+    if str(text).lower() == "none":
+        return None
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise CliError(f"--crop must be WIDTHxHEIGHT (e.g. 160x120) or none (got {text!r})") from None
+    return w, h
+
+
 def _device(name: str) -> torch.device:
     try:
         dev = torch.device(name)
@@ -236,7 +248,8 @@ def train(args: argparse.Namespace) -> dict:
         weights_variant(args.init)  # fail early with a one-line error
     dataset = RenderedFlowDataset(seed=config["seed"], length=max(1, config["steps"] * config["batch"]),
                                   width=config["width"], height=config["height"],
-                                  pairs_per_scene=config["pairs_per_scene"], exposure_jitter=config["jitter"])
+                                  pairs_per_scene=config["pairs_per_scene"], exposure_jitter=config["jitter"],
+                                  crop=parse_crop(config.get("crop", "none")))
     val = validation_set(config["val_size"], config["width"], config["height"]) if config["val_size"] else None
 
     torch.manual_seed(config["seed"])
@@ -260,7 +273,10 @@ def train(args: argparse.Namespace) -> dict:
 
     from torch.utils.data import DataLoader
 
-    indices = list(range(step * config["batch"], config["steps"] * config["batch"]))
+    stop = min(config["steps"], args.stop_at or config["steps"])
+    if stop <= step:
+        raise CliError(f"--stop-at {stop} is not after the checkpoint's step {step}")
+    indices = list(range(step * config["batch"], stop * config["batch"]))
     loader = DataLoader(dataset, batch_size=config["batch"], sampler=indices, num_workers=args.workers,
                         collate_fn=collate, drop_last=False, persistent_workers=False,
                         multiprocessing_context="spawn" if args.workers else None)
@@ -289,10 +305,10 @@ def train(args: argparse.Namespace) -> dict:
         steps_run += 1
         record = {"step": step, "loss": loss_value, "epe": epe, "lr": scheduler.get_last_lr()[0]}
         _log(log_path, record)
-        if val is not None and args.val_every and step % args.val_every == 0 and step < config["steps"]:
+        if val is not None and args.val_every and step % args.val_every == 0 and step < stop:
             last_val = evaluate(model, val, config["val_iters"], device)["epe"]
             _log(log_path, {"step": step, "val_epe": last_val})
-        if args.save_every and step % args.save_every == 0 and step < config["steps"]:
+        if args.save_every and step % args.save_every == 0 and step < stop:
             save_checkpoint(out / f"checkpoint-{step:06d}.pth", model, optimizer, scheduler, step, config)
             _prune(out, args.keep)
         bar.set_postfix(loss=f"{loss_value:.3f}", epe=f"{epe:.2f}", val_epe=f"{last_val:.2f}")
@@ -378,8 +394,12 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-flow", dest="max_flow", type=float, default=400.0,
                    help="ignore ground-truth flow longer than this (px)")
     d = p.add_argument_group("data")
-    d.add_argument("--width", type=int, default=DEFAULT_WIDTH, help="image width (multiple of 8)")
-    d.add_argument("--height", type=int, default=DEFAULT_HEIGHT, help="image height (multiple of 8)")
+    d.add_argument("--width", type=int, default=DEFAULT_WIDTH,
+                   help="rendered image width (multiple of 8), also the validation frames'")
+    d.add_argument("--height", type=int, default=DEFAULT_HEIGHT,
+                   help="rendered image height (multiple of 8), also the validation frames'")
+    d.add_argument("--crop", default="x".join(map(str, DEFAULT_CROP)),
+                   help="train on a random WIDTHxHEIGHT window of each rendered pair (none: whole frames)")
     d.add_argument("--seed", type=int, default=0, help="training data and initialisation seed")
     d.add_argument("--jitter", type=float, default=0.1, help="exposure jitter (max relative gain change)")
     d.add_argument("--pairs-per-scene", dest="pairs_per_scene", type=int, default=8,
@@ -395,6 +415,9 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--out", default="runs/raft-train", help="output directory")
     o.add_argument("--save-every", dest="save_every", type=int, default=200,
                    help="checkpoint every N steps (0: only at the end)")
+    o.add_argument("--stop-at", dest="stop_at", type=int, default=None, metavar="STEP",
+                   help="end this run after STEP (checkpoint and weights written; the learning-rate schedule "
+                        "still spans --steps, so --resume continues the same run)")
     o.add_argument("--keep", type=int, default=3, help="newest checkpoints to keep")
     o.add_argument("--device", default="cpu", help="cpu or cuda")
     o.add_argument("--threads", type=int, default=None, help="torch CPU threads (torch.set_num_threads)")
@@ -418,6 +441,14 @@ def _check(args: argparse.Namespace) -> None:
     if min(args.width, args.height) < 64:
         raise CliError(f"--width and --height must be at least 64 (RAFT's 4-level correlation pyramid needs "
                        f"1/8-resolution features of at least 8 cells; got {args.width}x{args.height})")
+    crop = parse_crop(args.crop)
+    if crop is not None and not args.eval_only:
+        cw, ch = crop
+        if cw % 8 or ch % 8 or min(cw, ch) < 64:
+            raise CliError(f"--crop must be multiples of 8, at least 64x64 (got {args.crop})")
+        if cw > args.width or ch > args.height:
+            raise CliError(f"--crop {args.crop} is larger than the {args.width}x{args.height} frames "
+                           f"(use a smaller --crop or --crop none)")
     if not 0.0 <= args.jitter < 1.0:
         raise CliError(f"--jitter must be in [0, 1) (got {args.jitter})")
     if not (args.lr > 0 and math.isfinite(args.lr)):
@@ -426,6 +457,8 @@ def _check(args: argparse.Namespace) -> None:
         raise CliError(f"--gamma must be in (0, 1] (got {args.gamma})")
     if args.clip <= 0:
         raise CliError(f"--clip must be positive (got {args.clip})")
+    if args.stop_at is not None and args.stop_at <= 0:
+        raise CliError(f"--stop-at must be positive (got {args.stop_at})")
     if args.threads is not None and args.threads <= 0:
         raise CliError(f"--threads must be positive (got {args.threads})")
     if args.eval_only and (args.resume or args.init):

@@ -20,7 +20,8 @@ from tools import train_raft
 from tools.raft_data import VALIDATION_SEED, RenderedFlowDataset, batch_at, validation_set
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = ["--width", "64", "--height", "64", "--batch", "2", "--iters", "2", "--val-iters", "2", "--quiet"]
+TINY = ["--width", "64", "--height", "64", "--crop", "none", "--batch", "2", "--iters", "2", "--val-iters", "2",
+        "--quiet"]
 
 
 @pytest.fixture(autouse=True)
@@ -88,6 +89,27 @@ def test_dataset_flow_is_correct_where_valid():
         n_valid += int(valid.sum())
     assert plain_err / n_valid > 2.0           # the camera really moved
     assert warped_err < 0.5 * plain_err        # and the flow explains the motion
+
+
+def test_crop_is_a_seeded_window_of_the_full_pair():
+    full = RenderedFlowDataset(seed=3, width=128, height=96)
+    cropped = RenderedFlowDataset(seed=3, width=128, height=96, crop=(64, 64))
+    windows = set()
+    for i in range(3):
+        f1, f2, ff, fv = full.pair(i)
+        c1, c2, cf, cv = cropped.pair(i)
+        assert c1.shape == (64, 64, 3) and cf.shape == (64, 64, 2) and cv.shape == (64, 64)
+        hits = [(y, x) for y in range(96 - 63) for x in range(128 - 63)
+                if np.array_equal(f1[y:y + 64, x:x + 64], c1)]
+        assert len(hits) == 1
+        y, x = hits[0]
+        win = (slice(y, y + 64), slice(x, x + 64))
+        assert np.array_equal(f2[win], c2) and np.array_equal(ff[win], cf) and np.array_equal(fv[win], cv)
+        windows.add(hits[0])
+        assert np.array_equal(cropped.pair(i)[0], c1)          # deterministic
+    assert len(windows) > 1                                     # the window moves from item to item
+    with pytest.raises(ValueError, match="crop"):
+        RenderedFlowDataset(width=128, height=96, crop=(160, 64))
 
 
 def test_exposure_jitter_changes_brightness_not_flow():
@@ -174,6 +196,20 @@ def test_resume_continues_identically(trained_run, tmp_path):
     assert not all(torch.equal(a[k], start[k]) for k in a)   # the resumed steps did train
 
 
+def test_stop_at_ends_early_on_the_same_schedule(trained_run, tmp_path):
+    """--stop-at 2 writes what the full run's step-2 checkpoint holds, and --resume from it finishes the run."""
+    rc = train_raft.main([*TINY, "--steps", "4", "--stop-at", "2", "--save-every", "0", "--val-size", "0",
+                          "--seed", "3", "--lr", "1e-3", "--out", str(tmp_path)])
+    assert rc == 0
+    assert sorted(_read_log(tmp_path / "log.jsonl")) == [1, 2]
+    early = torch.load(tmp_path / "checkpoint-000002.pth", weights_only=True)
+    full = torch.load(trained_run / "checkpoint-000002.pth", weights_only=True)
+    assert early["train"]["step"] == 2 and early["train"]["config"]["steps"] == 4
+    assert all(torch.equal(early["state_dict"][k], full["state_dict"][k]) for k in full["state_dict"])
+    assert train_raft.main(["--resume", str(tmp_path / "checkpoint-000002.pth"), "--stop-at", "2",
+                            "--out", str(tmp_path), "--quiet"]) == 2
+
+
 def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
                           "--height", "64", "--val-size", "2", "--val-iters", "2", "--out", str(tmp_path)])
@@ -205,6 +241,9 @@ def test_missing_weights_file_is_a_one_line_error_exit_2(tmp_path):
     (["--resume", "missing.pth"], "missing.pth"),
     (["--width", "60"], "multiples of 8"),
     (["--width", "48", "--height", "48"], "at least 64"),
+    (["--width", "128", "--height", "96"], "larger than the 128x96 frames"),
+    (["--crop", "160by120"], "WIDTHxHEIGHT"),
+    (["--crop", "56x56"], "at least 64x64"),
 ])
 def test_bad_input_is_a_one_line_error(argv, needle, tmp_path, capsys):
     rc = train_raft.main([*argv, "--out", str(tmp_path), "--quiet"])
