@@ -2,7 +2,10 @@
 
 Each flight is a full two-process SITL run (``tools.launch.launch``): the vehicle judges it from its own
 ground truth. Starts are drawn from a seeded generator: lateral offset and altitude offset up to ±0.5 m,
-distance to the wall 2–4 m. Several flights run at once on their own ports (PX4 instance numbers).
+distance to the wall 2–4 m. ``--random N`` evaluates N random scenes (``scenes.random_scene``: texture,
+opening shape, size and place, wall and background distances; drawn from ``--seed``) instead of, or besides,
+named ones; their specs are saved under ``OUT/scenes`` so any flight can be re-flown with ``flowgap-sitl
+--scene OUT/scenes/NAME.json``. Several flights run at once on their own ports (PX4 instance numbers).
 Writes ``flights.json`` (rows + summary) and ``flights.md``, and prints the table.
 """
 
@@ -36,6 +39,20 @@ def draw_starts(rng: np.random.Generator, k: int, wall_x: float, altitude: float
     return out
 
 
+def random_scene_files(count: int, seed: int, folder: Path) -> list[str]:
+    """Save ``count`` random scene specs (reproducible from ``seed``) under ``folder``; their paths."""
+    from scenes.library import random_scene
+
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for k in range(count):
+        spec = random_scene(np.random.default_rng([seed, 0xF1, k]))
+        path = folder / f"{spec.name}.json"
+        spec.save(path)
+        paths.append(str(path))
+    return paths
+
+
 def summarise(rows: list[dict]) -> dict:
     n = len(rows)
     ok = sum(r["success"] for r in rows)
@@ -67,7 +84,10 @@ def markdown(rows: list[dict], summary: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="flowgap-eval-flights", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("scenes", nargs="*", help="scene names (default: the 16-scene suite)")
+    p.add_argument("scenes", nargs="*", help="scene names or spec paths (default: the 16-scene suite, "
+                                             "unless --random is given)")
+    p.add_argument("--random", type=int, default=0, metavar="N",
+                   help="also fly N random scenes drawn from --seed (specs saved under OUT/scenes)")
     p.add_argument("--starts", type=int, default=3, help="randomised starts per scene (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start draws and the vehicles' noise")
     p.add_argument("--jobs", type=int, default=2, help="flights at once (default 2)")
@@ -80,12 +100,17 @@ def main(argv: list[str] | None = None) -> int:
     from scenes.build import resolve_spec
     from scenes.library import SUITE
 
-    scenes = args.scenes or list(SUITE)
+    if args.random < 0 or args.starts <= 0 or args.jobs <= 0:
+        print("flowgap-eval-flights: error: --random must be >= 0, --starts and --jobs positive", file=sys.stderr)
+        return 2
+    scenes = list(args.scenes) or ([] if args.random else list(SUITE))
     try:
+        scenes += random_scene_files(args.random, args.seed, args.out / "scenes")
         specs = {s: resolve_spec(s) for s in scenes}
-    except Exception as exc:  # noqa: BLE001 — unknown names: one line
+    except Exception as exc:  # noqa: BLE001 — unknown names, bad spec files: one line
         print(f"flowgap-eval-flights: error: {exc}", file=sys.stderr)
         return 2
+    labels = {s: specs[s].name for s in scenes}      # spec paths are reported by their scene's name
     rng = np.random.default_rng(args.seed)
     jobs = []
     for scene in scenes:
@@ -99,10 +124,11 @@ def main(argv: list[str] | None = None) -> int:
         scene, i, start, altitude = job
         instance = instances.get()
         try:
-            v = launch(scene, args.out / f"{scene}-{i}", start, args.speed, instance, args.flow, args.detector,
-                       seed=args.seed + i, images=False, log_sink=None, altitude=altitude)
+            v = launch(scene, args.out / f"{labels[scene]}-{i}", start, args.speed, instance, args.flow,
+                       args.detector, seed=args.seed + i, images=False, log_sink=None, altitude=altitude)
         finally:
             instances.put(instance)
+        v["scene"] = labels[scene]
         return v
 
     t0 = time.monotonic()

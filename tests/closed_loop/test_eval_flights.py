@@ -30,3 +30,26 @@ def test_summary_counts_and_never_counts_a_touch_as_success():
     assert abs(s["success_rate"] - 1 / 3) < 1e-3
     table = markdown(rows, s)
     assert "| a | 2 | 1 | 1 |" in table and "**1 (33 %)**" in table
+
+
+def test_random_scene_files_are_seeded_valid_specs(tmp_path):
+    from scenes.build import resolve_spec
+    from scenes.spec import TEXTURES
+    from tools.eval_flights import random_scene_files
+
+    paths = random_scene_files(5, 3, tmp_path / "a")
+    again = random_scene_files(5, 3, tmp_path / "b")
+    other = random_scene_files(5, 4, tmp_path / "c")
+    assert [p.rsplit("/", 1)[1] for p in paths] == [p.rsplit("/", 1)[1] for p in again]
+    assert {p.rsplit("/", 1)[1] for p in paths}.isdisjoint(p.rsplit("/", 1)[1] for p in other)
+    specs = [resolve_spec(p) for p in paths]
+    assert len({s.name for s in specs}) == 5 and all(s.wall.texture in TEXTURES for s in specs)
+
+
+def test_bad_arguments_are_one_line_errors(tmp_path, capsys):
+    from tools.eval_flights import main
+
+    assert main(["--random", "-1", "--out", str(tmp_path)]) == 2
+    assert main(["no_such_scene", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all(line.startswith("flowgap-eval-flights: error:") for line in err)
