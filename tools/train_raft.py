@@ -242,6 +242,8 @@ def train(args: argparse.Namespace) -> dict:
             print(f"{PROG}: note: resuming with the checkpoint's settings; ignoring {', '.join(changed)}",
                   file=sys.stderr)
         config.update({k: stored[k] for k in TRAIN_KEYS if k in stored})
+        if "crop" not in stored:
+            config["crop"] = "none"        # checkpoints from before --crop existed trained on whole frames
 
     out = Path(args.out)
     if args.init and not resume:
