@@ -15,6 +15,26 @@ import time
 from companion.link.base import AutopilotLink, LinkError, parse_endpoint
 
 log = logging.getLogger(__name__)
+sdk_log = logging.getLogger("mavsdk")
+_routed = False
+
+
+def route_mavsdk_log() -> None:
+    """Send the C++ MAVSDK's own log lines to the ``mavsdk`` Python logger instead of stdout (once per process)."""
+    global _routed
+    if _routed:
+        return
+    import mavsdk
+
+    levels = {mavsdk.LogLevel.DEBUG: logging.DEBUG, mavsdk.LogLevel.INFO: logging.INFO,
+              mavsdk.LogLevel.WARN: logging.WARNING, mavsdk.LogLevel.ERROR: logging.ERROR}
+
+    def forward(level, message, file, line) -> bool:
+        sdk_log.log(levels.get(level, logging.INFO), "%s", message)
+        return True                                   # handled: MAVSDK does not print it too
+
+    mavsdk.log_subscribe(forward)
+    _routed = True
 
 
 class MavsdkLink(AutopilotLink):
@@ -43,6 +63,7 @@ class MavsdkLink(AutopilotLink):
         from mavsdk.plugins.offboard import Offboard
         from mavsdk.plugins.telemetry import Telemetry
 
+        route_mavsdk_log()
         self._sdk = mavsdk.Mavsdk(mavsdk.Configuration.create_with_component_type(
             mavsdk.ComponentType.COMPANION_COMPUTER))
         result = self._sdk.add_any_connection(self._url())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 
@@ -90,8 +91,9 @@ def test_refusal_carries_the_autopilots_reason(vehicle_for_link):
         link.close()
 
 
-def test_mavsdk_backend_flies_through_the_same_interface(vehicle_for_link):
+def test_mavsdk_backend_flies_through_the_same_interface(vehicle_for_link, capfd, caplog):
     pytest.importorskip("mavsdk")
+    caplog.set_level(logging.DEBUG, logger="mavsdk")
     _, port, _ = vehicle_for_link()
     link = make_link(f"udpin://127.0.0.1:{port}", backend="mavsdk")
     try:
@@ -111,3 +113,6 @@ def test_mavsdk_backend_flies_through_the_same_interface(vehicle_for_link):
         link.wait_for(lambda t: not t.armed, 30, "landing and disarm")
     finally:
         link.close()
+    # MAVSDK's own log lines go to the "mavsdk" logger, not straight to the terminal
+    assert any(r.name == "mavsdk" for r in caplog.records)
+    assert "mavsdk_impl" not in capfd.readouterr().out
