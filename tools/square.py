@@ -24,6 +24,23 @@ log = logging.getLogger("flowgap-square")
 POSITION_ONLY = 0b1001_1111_1000  # type_mask: position + yaw
 
 
+def recv_unlocked(conn, lock: threading.Lock, accept, timeout: float):
+    """The first message ``accept(msg)`` takes within ``timeout`` s, else None.
+
+    Polls without blocking and holds ``lock`` only around each read, so a setpoint thread sharing the
+    connection can send at any time.
+    """
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        with lock:
+            msg = conn.recv_match(blocking=False)
+        if msg is None:
+            time.sleep(0.002)
+        elif accept(msg):
+            return msg
+    return None
+
+
 class ScriptedClient:
     """The smallest honest offboard client: commands with acks, and a 20 Hz setpoint stream thread."""
 
@@ -48,19 +65,12 @@ class ScriptedClient:
                         0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, POSITION_ONLY, *self.target, 0, 0, 0, 0, 0, 0, 0, 0)
 
     def recv(self, kind: str, timeout: float, condition=lambda m: True):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            # Never block while holding the lock: the setpoint thread must be able to send at any time.
-            with self.lock:
-                msg = self.conn.recv_match(blocking=False)
-            if msg is None:
-                time.sleep(0.002)
-                continue
+        def accept(msg) -> bool:
             if msg.get_type() == "STATUSTEXT" and msg.severity <= mavlink.MAV_SEVERITY_WARNING:
                 log.warning("vehicle says: %s", msg.text)
-            if msg.get_type() == kind and condition(msg):
-                return msg
-        return None
+            return msg.get_type() == kind and condition(msg)
+
+        return recv_unlocked(self.conn, self.lock, accept, timeout)
 
     def command(self, command: int, *params: float) -> None:
         p = list(params) + [0.0] * (7 - len(params))

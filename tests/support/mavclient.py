@@ -9,6 +9,8 @@ import time
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from tools.square import recv_unlocked
+
 
 class MavClient:
     """A minimal offboard client over pymavlink, as a companion computer would write one."""
@@ -31,16 +33,8 @@ class MavClient:
 
     def recv(self, kind: str | list[str], timeout: float = 5.0, condition=None):
         kinds = {kind} if isinstance(kind, str) else set(kind)
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            # Never block while holding the lock: the setpoint thread must be able to send at any time.
-            with self.lock:
-                msg = self.conn.recv_match(blocking=False)
-            if msg is None:
-                time.sleep(0.002)
-            elif msg.get_type() in kinds and (condition is None or condition(msg)):
-                return msg
-        return None
+        return recv_unlocked(self.conn, self.lock,
+                             lambda m: m.get_type() in kinds and (condition is None or condition(m)), timeout)
 
     def statustext(self, fragment: str, timeout: float = 5.0) -> str | None:
         """The first STATUSTEXT containing ``fragment``, reassembled from MAVLink 2 chunks (id, chunk_seq)."""
