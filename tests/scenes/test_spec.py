@@ -37,17 +37,22 @@ def test_bad_specs_raise_one_line_errors():
         SceneSpec.from_json('{"openings": [{"shape": "rect", "center": [0, -3.9], "size": [1, 1]}]}')
 
 
+def best_clearance_in_opening(spec, n: int) -> float:
+    """Largest collision clearance over an n×n grid spanning the opening's bounding box, mid-wall."""
+    col = SceneCollision(spec)
+    poly = np.array(spec.openings[0].polygon())
+    ys, zs = np.meshgrid(np.linspace(poly[:, 0].min(), poly[:, 0].max(), n),
+                         np.linspace(poly[:, 1].min(), poly[:, 1].max(), n))
+    x_mid = spec.wall_x + spec.wall.thickness / 2
+    return max(col.clearance((x_mid, y, z)) for y, z in zip(ys.ravel(), zs.ravel(), strict=True))
+
+
 @pytest.mark.parametrize("name", SUITE)
 def test_suite_openings_fit_the_vehicle(name):
     """Every suite opening has a point 0.3 m or more from its edges, near z = -1.5 (0.35 m drone + margin)."""
     spec = resolve_spec(name)
-    col = SceneCollision(spec)
     poly = np.array(spec.openings[0].polygon())
-    ys, zs = np.meshgrid(np.linspace(poly[:, 0].min(), poly[:, 0].max(), 40),
-                         np.linspace(poly[:, 1].min(), poly[:, 1].max(), 40))
-    x_mid = spec.wall_x + spec.wall.thickness / 2
-    best = max(col.clearance((x_mid, y, z)) for y, z in zip(ys.ravel(), zs.ravel(), strict=True))
-    assert best > 0.3
+    assert best_clearance_in_opening(spec, 40) > 0.3
     assert -1.8 < poly[:, 1].mean() < -1.2
 
 
@@ -85,10 +90,4 @@ def test_background_scale_matches_apparent_size():
 def test_random_openings_fit_the_vehicle():
     rng = np.random.default_rng(11)
     for _ in range(20):
-        spec = random_scene(rng)
-        col = SceneCollision(spec)
-        poly = np.array(spec.openings[0].polygon())
-        ys, zs = np.meshgrid(np.linspace(poly[:, 0].min(), poly[:, 0].max(), 25),
-                             np.linspace(poly[:, 1].min(), poly[:, 1].max(), 25))
-        x_mid = spec.wall_x + spec.wall.thickness / 2
-        assert max(col.clearance((x_mid, y, z)) for y, z in zip(ys.ravel(), zs.ravel(), strict=True)) > 0.25
+        assert best_clearance_in_opening(random_scene(rng), 25) > 0.25
