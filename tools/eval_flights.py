@@ -43,9 +43,10 @@ def random_scene_files(count: int, seed: int, folder: Path) -> list[str]:
     """Save ``count`` random scene specs (reproducible from ``seed``) under ``folder``; their paths."""
     from scenes.library import random_scene
 
+    if count:
+        folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for k in range(count):
-        folder.mkdir(parents=True, exist_ok=True)
         spec = random_scene(np.random.default_rng([seed, 0xF1, k]))
         path = folder / f"{spec.name}.json"
         spec.save(path)
