@@ -84,7 +84,8 @@ def build_backends(specs, raft_weights, raft_iters: int, threads: int):
             if name == "groundtruth":
                 continue            # built per scene
             if name == "raft":
-                options.update(iters=raft_iters, num_threads=threads)
+                options.setdefault("iters", raft_iters)
+                options["num_threads"] = threads
                 if raft_weights:
                     options["weights"] = raft_weights
             backends[spec] = make_flow_backend(name, **options)

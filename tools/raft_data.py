@@ -5,14 +5,19 @@ dataset's settings (resolution, pairs per scene, jitter): the scene comes from
 ``scenes.random_scene(default_rng([s, i // pairs_per_scene, 0]), ALL_TEXTURES)`` (the suite's four texture
 families plus weak "plaster" and repetitive "tiles"), the pose pair from
 ``scenes.groundtruth.sample_pose_pair(spec, default_rng([s, i, 1]))`` and the exposure jitter from
-``default_rng([s, i, 2])``, and the crop window (when ``crop`` is set) from ``default_rng([s, i, 3])``.
+``default_rng([s, i, 2])``, the zoom factor (when ``zoom`` is set) from ``default_rng([s, i, 4])`` and the
+crop window (when ``crop`` is set) from ``default_rng([s, i, 3])``.
 Consecutive items share a scene (``pairs_per_scene``), and built scenes are kept in a small per-process
 (hence per-DataLoader-worker) cache, so a pair costs two renders (~35 ms at 320×240) rather than a scene
 build (~0.15 s).
 
 Training renders at the flight camera's resolution (320×240, so textures and flow magnitudes look as they do
 in flight) and crops a random 160×120 window of both frames, which keeps a training step cheap on a CPU
-(RAFT is trained on crops for the same reason); the validation set is full 320×240 frames.
+(RAFT is trained on crops for the same reason); the validation set is full 320×240 frames.  With ``zoom``
+the two frames are first enlarged by a random factor (bicubic, through the same ``zoom_frame`` that
+:class:`~companion.flow.raft.backend.RaftBackend` enlarges frames with for ``input_scale``) and the flow is
+scaled with them, so that the network learns to run on enlarged camera frames, where its 1/8-resolution grid
+is finer relative to the camera's pixels.
 
 Each item is a dict of tensors: ``image1``/``image2`` 3×H×W float32 RGB in 0..255, ``flow`` 2×H×W float32
 (forward flow 1 -> 2, pixels; 0 where not valid), ``valid`` H×W float32 (1 where the flow is exact and unoccluded).
@@ -44,14 +49,15 @@ class RenderedFlowDataset(Dataset):
     ``exposure_jitter`` the maximum relative gain change per image (0 disables; the two images of a pair
     get independent gains and offsets, as an auto-exposing camera would), ``max_step`` / ``max_turn_rad``
     the per-axis translation (m) and rotation (rad) bounds between the two poses, ``scene_cache`` how many
-    built scenes to keep per process, ``crop`` an optional (width, height) window cut at a random place
-    from both rendered frames (items are then crop-sized).
+    built scenes to keep per process, ``zoom`` an optional (low, high) range of the factor both rendered
+    frames are enlarged by (uniform; the flow is scaled with them), ``crop`` an optional (width, height)
+    window cut at a random place from both (zoomed) frames (items are then crop-sized).
     """
 
     def __init__(self, seed: int = 0, length: int = 100_000, width: int = DEFAULT_WIDTH,
                  height: int = DEFAULT_HEIGHT, pairs_per_scene: int = 8, exposure_jitter: float = 0.0,
                  max_step: float = 0.15, max_turn_rad: float = 0.05, scene_cache: int = 4,
-                 crop: tuple[int, int] | None = None) -> None:
+                 crop: tuple[int, int] | None = None, zoom: tuple[float, float] | None = None) -> None:
         if width <= 0 or height <= 0 or width % 8 or height % 8:
             raise ValueError(f"image size must be positive multiples of 8 (got {width}x{height})")
         if crop is not None:
@@ -59,6 +65,13 @@ class RenderedFlowDataset(Dataset):
             if cw <= 0 or ch <= 0 or cw % 8 or ch % 8 or cw > width or ch > height:
                 raise ValueError(f"crop must be positive multiples of 8 within {width}x{height} (got {cw}x{ch})")
             crop = (cw, ch)
+        if zoom is not None:
+            lo, hi = (float(v) for v in zoom)
+            if not (1.0 <= lo <= hi and np.isfinite(hi)):
+                raise ValueError(f"zoom must be a range 1 <= low <= high (got {zoom})")
+            if crop is None:
+                raise ValueError("zoom needs a crop (zoomed frames are larger than the camera's)")
+            zoom = (lo, hi)
         if length <= 0:
             raise ValueError("length must be positive")
         if pairs_per_scene <= 0:
@@ -74,6 +87,7 @@ class RenderedFlowDataset(Dataset):
         self.max_turn_rad = float(max_turn_rad)
         self.scene_cache = max(1, int(scene_cache))
         self.crop = crop
+        self.zoom = zoom
         self._scenes: OrderedDict[int, tuple] = OrderedDict()
         self._camera = None
 
@@ -138,11 +152,16 @@ class RenderedFlowDataset(Dataset):
             img1 = np.clip(img1 * gains[0] + offsets[0], 0.0, 255.0)
             img2 = np.clip(img2 * gains[1] + offsets[1], 0.0, 255.0)
         img1, img2 = img1.astype(np.float32), img2.astype(np.float32)
+        height, width = self.height, self.width
+        if self.zoom is not None:
+            factor = float(np.random.default_rng([self.seed, index, 4]).uniform(*self.zoom))
+            width, height = round(self.width * factor), round(self.height * factor)
+            img1, img2, flow, valid = zoom_pair(img1, img2, flow, valid, (width, height))
         if self.crop is not None:
             cw, ch = self.crop
             rng = np.random.default_rng([self.seed, index, 3])
-            x0 = int(rng.integers(0, self.width - cw + 1))
-            y0 = int(rng.integers(0, self.height - ch + 1))
+            x0 = int(rng.integers(0, width - cw + 1))
+            y0 = int(rng.integers(0, height - ch + 1))
             win = (slice(y0, y0 + ch), slice(x0, x0 + cw))
             img1, img2, flow, valid = img1[win], img2[win], flow[win], valid[win]
         return (np.ascontiguousarray(img1), np.ascontiguousarray(img2), np.ascontiguousarray(flow, np.float32),
@@ -156,6 +175,25 @@ class RenderedFlowDataset(Dataset):
             "flow": torch.from_numpy(np.ascontiguousarray(flow.transpose(2, 0, 1))),
             "valid": torch.from_numpy(valid.astype(np.float32)),
         }
+
+
+def zoom_pair(img1: np.ndarray, img2: np.ndarray, flow: np.ndarray, valid: np.ndarray,
+              size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Enlarge a flow pair to ``size`` (width, height): images bicubic, flow bilinear and scaled per axis.
+
+    A zoomed pixel keeps its flow only where every source pixel it draws on was valid, so no vector is
+    blended with an occluded or inexact one.
+    """
+    import cv2
+
+    from companion.flow.raft.backend import zoom_frame
+
+    w, h = size
+    sx, sy = w / img1.shape[1], h / img1.shape[0]
+    f = cv2.resize(flow, (w, h), interpolation=cv2.INTER_LINEAR) * np.array([sx, sy], np.float32)
+    ok = cv2.resize(valid.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR) >= 1.0 - 1e-6
+    f = np.where(ok[..., None], f, 0.0).astype(np.float32)
+    return zoom_frame(img1, size), zoom_frame(img2, size), f, ok
 
 
 def validation_set(size: int = DEFAULT_VALIDATION_SIZE, width: int = DEFAULT_WIDTH,

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from companion.flow.raft.backend import DEFAULT_INPUT_SCALE, estimate_flow
 from tools.raft_data import (
     DEFAULT_CROP,
     DEFAULT_HEIGHT,
@@ -49,7 +50,7 @@ from tools.raft_data import (
 
 PROG = "flowgap-train-raft"
 TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height", "crop",
-              "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters")
+              "zoom", "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters")
 
 
 class CliError(Exception):
@@ -84,8 +85,11 @@ def _epe_sum(flow: np.ndarray, gt: np.ndarray, valid: np.ndarray) -> tuple[float
 
 @torch.no_grad()
 def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, device: torch.device,
-             with_dis: bool = False) -> dict:
-    """Validation EPE (mean over all valid pixels of all pairs) of ``model``, optionally of DIS medium."""
+             with_dis: bool = False, input_scale: float = 1.0) -> dict:
+    """Validation EPE (mean over all valid pixels of all pairs) of ``model``, optionally of DIS medium.
+
+    ``input_scale`` enlarges the frames before RAFT as the ``raft`` backend does (``estimate_flow``).
+    """
     was_training = model.training
     model.eval()
     raft_sum = dis_sum = 0.0
@@ -97,10 +101,7 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
         dis = make_flow_backend("dis", preset="medium")
     for i in range(len(dataset)):
         img1, img2, gt, valid = dataset.pair(i)
-        t1 = torch.from_numpy(img1.transpose(2, 0, 1)).unsqueeze(0).to(device)
-        t2 = torch.from_numpy(img2.transpose(2, 0, 1)).unsqueeze(0).to(device)
-        out = model(t1, t2, iters=iters)
-        flow = out.flow_up[0].permute(1, 2, 0).float().cpu().numpy()
+        flow, _ = estimate_flow(model, img1, img2, iters=iters, input_scale=input_scale, device=device)
         s, c = _epe_sum(flow, gt, valid)
         raft_sum += s
         count += c
@@ -109,7 +110,7 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
             dis_sum += _epe_sum(dflow, gt, valid)[0]
     model.train(was_training)
     result = {"pairs": len(dataset), "valid_pixels": count, "width": dataset.width, "height": dataset.height,
-              "iters": iters, "epe": raft_sum / count if count else float("nan")}
+              "iters": iters, "input_scale": input_scale, "epe": raft_sum / count if count else float("nan")}
     if dis is not None:
         result["dis_medium_epe"] = dis_sum / count if count else float("nan")
     return result
@@ -244,6 +245,8 @@ def train(args: argparse.Namespace) -> dict:
         config.update({k: stored[k] for k in TRAIN_KEYS if k in stored})
         if "crop" not in stored:
             config["crop"] = "none"        # checkpoints from before --crop existed trained on whole frames
+        if "zoom" not in stored:
+            config["zoom"] = None          # nor did they zoom
 
     out = Path(args.out)
     if args.init and not resume:
@@ -251,7 +254,8 @@ def train(args: argparse.Namespace) -> dict:
     dataset = RenderedFlowDataset(seed=config["seed"], length=max(1, config["steps"] * config["batch"]),
                                   width=config["width"], height=config["height"],
                                   pairs_per_scene=config["pairs_per_scene"], exposure_jitter=config["jitter"],
-                                  crop=parse_crop(config.get("crop", "none")))
+                                  crop=parse_crop(config.get("crop", "none")),
+                                  zoom=tuple(config["zoom"]) if config.get("zoom") else None)
     val = validation_set(config["val_size"], config["width"], config["height"]) if config["val_size"] else None
 
     torch.manual_seed(config["seed"])
@@ -308,7 +312,7 @@ def train(args: argparse.Namespace) -> dict:
         record = {"step": step, "loss": loss_value, "epe": epe, "lr": scheduler.get_last_lr()[0]}
         _log(log_path, record)
         if val is not None and args.val_every and step % args.val_every == 0 and step < stop:
-            last_val = evaluate(model, val, config["val_iters"], device)["epe"]
+            last_val = evaluate(model, val, config["val_iters"], device, input_scale=args.input_scale)["epe"]
             _log(log_path, {"step": step, "val_epe": last_val})
         if args.save_every and step % args.save_every == 0 and step < stop:
             save_checkpoint(out / f"checkpoint-{step:06d}.pth", model, optimizer, scheduler, step, config)
@@ -326,7 +330,7 @@ def train(args: argparse.Namespace) -> dict:
     summary = {"weights": str(final), "step": step, "steps_run": steps_run,
                "seconds_per_step": elapsed / steps_run if steps_run else None}
     if val is not None:
-        result = evaluate(model, val, config["val_iters"], device, with_dis=True)
+        result = evaluate(model, val, config["val_iters"], device, with_dis=True, input_scale=args.input_scale)
         _log(log_path, {"step": step, "val_epe": result["epe"], "dis_medium_epe": result["dis_medium_epe"]})
         summary["validation"] = result
         (out / "eval.json").write_text(json.dumps({"weights": str(final), **result}, indent=2) + "\n")
@@ -345,13 +349,15 @@ def eval_only(args: argparse.Namespace) -> dict:
     layout = load_weights_into(model, args.eval_only, variant)
     model.to(device).eval()
     size = args.val_size or DEFAULT_VALIDATION_SIZE
-    result = evaluate(model, validation_set(size, args.width, args.height), args.val_iters, device, with_dis=True)
+    result = evaluate(model, validation_set(size, args.width, args.height), args.val_iters, device, with_dis=True,
+                      input_scale=args.input_scale)
     result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, **result}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
     print(f"EPE raft-{variant} {result['epe']:.3f} px, dis:medium {result['dis_medium_epe']:.3f} px "
-          f"({result['pairs']} validation pairs, {args.width}x{args.height}, {args.val_iters} iters) "
+          f"({result['pairs']} validation pairs, {args.width}x{args.height}, {args.val_iters} iters, "
+          f"input scale {args.input_scale:g}) "
           f"-> {out / 'eval.json'}")
     return result
 
@@ -402,6 +408,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rendered image height (multiple of 8), also the validation frames'")
     d.add_argument("--crop", default="x".join(map(str, DEFAULT_CROP)),
                    help="train on a random WIDTHxHEIGHT window of each rendered pair (none: whole frames)")
+    d.add_argument("--zoom", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
+                   help="enlarge each rendered pair by a random factor in [LOW, HIGH] before cropping, so the "
+                        "weights also fit the raft backend's input_scale (none: no zoom)")
     d.add_argument("--seed", type=int, default=0, help="training data and initialisation seed")
     d.add_argument("--jitter", type=float, default=0.1, help="exposure jitter (max relative gain change)")
     d.add_argument("--pairs-per-scene", dest="pairs_per_scene", type=int, default=8,
@@ -411,6 +420,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--val-size", dest="val_size", type=int, default=DEFAULT_VALIDATION_SIZE,
                    help="validation pairs (fixed seed; 0 disables validation while training)")
     v.add_argument("--val-iters", dest="val_iters", type=int, default=12, help="RAFT iterations for validation")
+    v.add_argument("--input-scale", dest="input_scale", type=float, default=DEFAULT_INPUT_SCALE,
+                   help="enlarge validation frames by this factor before RAFT, as the raft backend's "
+                        "input_scale does")
     v.add_argument("--val-every", dest="val_every", type=int, default=200,
                    help="validate every N steps (0: only at the end)")
     o = p.add_argument_group("output and runtime")
@@ -451,6 +463,14 @@ def _check(args: argparse.Namespace) -> None:
         if cw > args.width or ch > args.height:
             raise CliError(f"--crop {args.crop} is larger than the {args.width}x{args.height} frames "
                            f"(use a smaller --crop or --crop none)")
+    if not (math.isfinite(args.input_scale) and 0.25 <= args.input_scale <= 4.0):
+        raise CliError(f"--input-scale must be within 0.25..4 (got {args.input_scale})")
+    if args.zoom is not None:
+        lo, hi = args.zoom
+        if not (1.0 <= lo <= hi and math.isfinite(hi)):
+            raise CliError(f"--zoom must be 1 <= LOW <= HIGH (got {lo} {hi})")
+        if crop is None and not args.eval_only:
+            raise CliError("--zoom needs a --crop (zoomed frames are larger than the camera's)")
     if not 0.0 <= args.jitter < 1.0:
         raise CliError(f"--jitter must be in [0, 1) (got {args.jitter})")
     if not (args.lr > 0 and math.isfinite(args.lr)):

@@ -51,12 +51,36 @@ def make_flow_backend(name: str, **options) -> FlowBackend:
 
 
 def parse_backend(spec: str) -> tuple[str, dict]:
-    """'dis:fast' -> ('dis', {'preset': 'fast'}); 'raft' -> ('raft', {}); 'raft:large' -> variant."""
+    """A backend spec -> (name, options).
+
+    'dis:fast' -> ('dis', {'preset': 'fast'}); 'raft' -> ('raft', {}); 'raft:large' -> a variant;
+    'raft:scale=1.5', 'raft:small,iters=20' -> RAFT options (``scale`` is the backend's ``input_scale``).
+    """
     name, _, arg = spec.partition(":")
     if not arg:
         return name, {}
     if name == "dis":
         return name, {"preset": arg}
     if name == "raft":
-        return name, {"variant": arg}
-    raise ValueError(f"backend {spec!r}: only dis:<preset> and raft:<variant> take an argument")
+        return name, _raft_options(spec, arg)
+    raise ValueError(f"backend {spec!r}: only dis:<preset> and raft:<variant>,scale=<s>,iters=<n> take an argument")
+
+
+_RAFT_KEYS = {"scale": ("input_scale", float), "iters": ("iters", int)}
+
+
+def _raft_options(spec: str, arg: str) -> dict:
+    options: dict = {}
+    for item in arg.split(","):
+        key, eq, value = item.partition("=")
+        if not eq:
+            options["variant"] = key
+            continue
+        if key not in _RAFT_KEYS:
+            raise ValueError(f"backend {spec!r}: unknown RAFT option {key!r} (use scale=<s> or iters=<n>)")
+        option, kind = _RAFT_KEYS[key]
+        try:
+            options[option] = kind(value)
+        except ValueError:
+            raise ValueError(f"backend {spec!r}: {key} must be a number (got {value!r})") from None
+    return options

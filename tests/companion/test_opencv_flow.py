@@ -44,3 +44,30 @@ def test_registry_rejects_unknown_and_bad_inputs():
         make_flow_backend("dis").estimate(img.astype(np.float32), img)
     with pytest.raises(ValueError, match="shape"):
         make_flow_backend("dis").estimate(img, np.zeros((10, 12, 3), np.uint8))
+
+
+@pytest.mark.parametrize("spec, expected", [
+    ("dis", ("dis", {})),
+    ("dis:fine", ("dis", {"preset": "fine"})),
+    ("raft", ("raft", {})),
+    ("raft:large", ("raft", {"variant": "large"})),
+    ("raft:scale=1.5", ("raft", {"input_scale": 1.5})),
+    ("raft:small,iters=20,scale=2", ("raft", {"variant": "small", "iters": 20, "input_scale": 2.0})),
+])
+def test_backend_specs_parse_to_options(spec, expected):
+    from companion.flow.registry import parse_backend
+
+    assert parse_backend(spec) == expected
+
+
+@pytest.mark.parametrize("spec, needle", [
+    ("raft:zoom=2", "unknown RAFT option 'zoom'"),
+    ("raft:scale=big", "scale must be a number"),
+    ("farneback:x", "only dis:<preset>"),
+])
+def test_bad_backend_specs_are_one_line_errors(spec, needle):
+    from companion.flow.registry import parse_backend
+
+    with pytest.raises(ValueError, match=needle) as info:
+        parse_backend(spec)
+    assert "\n" not in str(info.value)

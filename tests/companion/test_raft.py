@@ -233,6 +233,29 @@ def test_warm_start_changes_result_and_zero_update_returns_init():
         np.testing.assert_allclose(out, init, atol=1e-5)
 
 
+@pytest.mark.parametrize("scale", [1.5, 2.0, 0.75])
+def test_input_scale_zooms_frames_and_returns_flow_in_frame_pixels(scale):
+    img1, img2 = textured_pair(90, 100, (2.0, 1.0))
+    backend = make_flow_backend("raft", random_init_seed=2, iters=2, input_scale=scale)
+    flow = backend.estimate(img1, img2)
+    assert flow.shape == (90, 100, 2) and flow.dtype == np.float32 and np.isfinite(flow).all()
+    assert not np.allclose(flow, make_flow_backend("raft", random_init_seed=2, iters=2).estimate(img1, img2))
+    # With the flow head silenced RAFT returns its initial flow: a uniform (2, -1) px init goes out to the
+    # zoomed frames as (2, -1) * scale and must come back as (2, -1) frame pixels.
+    with torch.no_grad():
+        backend.model.update_block.flow_head.conv2.weight.zero_()
+        backend.model.update_block.flow_head.conv2.bias.zero_()
+    init = np.zeros((90, 100, 2), np.float32)
+    init[..., 0], init[..., 1] = 2.0, -1.0
+    np.testing.assert_allclose(backend.estimate(img1, img2, flow_init=init), init, atol=1e-4)
+
+
+@pytest.mark.parametrize("scale", [0.0, -1.0, float("nan"), 8.0])
+def test_bad_input_scale_is_refused(scale):
+    with pytest.raises(ValueError, match="input_scale"):
+        make_flow_backend("raft", random_init_seed=1, input_scale=scale)
+
+
 def test_backend_warm_start_carries_previous_flow():
     img1, img2 = textured_pair(64, 64, (2.0, 1.0))
     warm = make_flow_backend("raft", random_init_seed=3, iters=1, warm_start=True)

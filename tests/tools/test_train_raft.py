@@ -112,6 +112,46 @@ def test_crop_is_a_seeded_window_of_the_full_pair():
         RenderedFlowDataset(width=128, height=96, crop=(160, 64))
 
 
+def test_zoom_enlarges_the_pair_and_scales_its_flow_like_a_larger_camera():
+    """A zoomed pair's flow matches the exact flow rendered by a camera of twice the resolution."""
+    from scenes.camera import PinholeCamera
+    from scenes.groundtruth import flow_between, sample_pose_pair
+    from scenes.render import render_splats
+    from tools.raft_data import zoom_pair
+
+    ds = RenderedFlowDataset(seed=3, width=96, height=64)
+    spec, cloud = ds.scene(0)
+    pose1, pose2 = sample_pose_pair(spec, np.random.default_rng(5))
+    small, large = PinholeCamera(96, 64), PinholeCamera(192, 128)
+    flow, valid = flow_between(cloud, small, pose1, pose2)
+    big_flow, big_valid = flow_between(cloud, large, pose1, pose2)
+    img = render_splats(cloud, small, pose1).rgb.astype(np.float32)
+    z1, z2, zflow, zvalid = zoom_pair(img, img, np.where(valid[..., None], flow, 0).astype(np.float32), valid,
+                                      (192, 128))
+    assert z1.shape == (128, 192, 3) and zflow.shape == (128, 192, 2) and zvalid.shape == (128, 192)
+    assert z1.dtype == np.float32 and z1.min() >= 0.0 and z1.max() <= 255.0
+    assert np.all(zflow[~zvalid] == 0)
+    both = zvalid & big_valid
+    assert both.mean() > 0.5
+    err = np.linalg.norm(zflow - big_flow, axis=-1)[both]
+    assert np.median(np.linalg.norm(big_flow, axis=-1)[both]) > 1.0      # the camera really moved
+    assert err.mean() < 0.1, err.mean()                                  # x2 magnitudes, same geometry
+
+
+def test_zoomed_items_are_seeded_crops_of_varying_scale():
+    ds = RenderedFlowDataset(seed=4, width=96, height=64, crop=(64, 64), zoom=(1.0, 2.0))
+    a, b = ds.pair(1), RenderedFlowDataset(seed=4, width=96, height=64, crop=(64, 64), zoom=(1.0, 2.0)).pair(1)
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x, y)
+    assert a[0].shape == (64, 64, 3) and a[2].shape == (64, 64, 2)
+    plain = RenderedFlowDataset(seed=4, width=96, height=64, crop=(64, 64)).pair(1)
+    assert not np.array_equal(plain[0], a[0])
+    with pytest.raises(ValueError, match="zoom"):
+        RenderedFlowDataset(width=96, height=64, crop=(64, 64), zoom=(0.5, 1.0))
+    with pytest.raises(ValueError, match="crop"):
+        RenderedFlowDataset(width=96, height=64, zoom=(1.0, 2.0))
+
+
 def test_exposure_jitter_changes_brightness_not_flow():
     plain = RenderedFlowDataset(seed=2, width=64, height=64).item(1)
     jit = RenderedFlowDataset(seed=2, width=64, height=64, exposure_jitter=0.3).item(1)
@@ -221,6 +261,14 @@ def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     assert math.isfinite(result["epe"]) and result["epe"] >= 0
     assert math.isfinite(result["dis_medium_epe"]) and result["dis_medium_epe"] >= 0
     assert f"{result['epe']:.3f}" in out
+    assert result["input_scale"] == 1.0
+    rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
+                          "--height", "64", "--val-size", "2", "--val-iters", "2", "--input-scale", "1.5",
+                          "--out", str(tmp_path / "zoomed")])
+    assert rc == 0 and "input scale 1.5" in capsys.readouterr().out
+    zoomed = json.loads((tmp_path / "zoomed" / "eval.json").read_text())
+    assert zoomed["input_scale"] == 1.5 and zoomed["valid_pixels"] == result["valid_pixels"]
+    assert zoomed["epe"] != result["epe"] and zoomed["dis_medium_epe"] == result["dis_medium_epe"]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -244,6 +292,9 @@ def test_missing_weights_file_is_a_one_line_error_exit_2(tmp_path):
     (["--width", "128", "--height", "96"], "larger than the 128x96 frames"),
     (["--crop", "160by120"], "WIDTHxHEIGHT"),
     (["--crop", "56x56"], "at least 64x64"),
+    (["--zoom", "0.5", "2"], "--zoom must be 1 <= LOW <= HIGH"),
+    (["--zoom", "1", "2", "--crop", "none"], "--zoom needs a --crop"),
+    (["--input-scale", "0"], "--input-scale must be within"),
 ])
 def test_bad_input_is_a_one_line_error(argv, needle, tmp_path, capsys):
     rc = train_raft.main([*argv, "--out", str(tmp_path), "--quiet"])

@@ -21,6 +21,22 @@ DEFAULT_WEIGHTS = WEIGHTS_DIR / "raft-small-flowgap.pth"
 # The 4-level correlation pyramid halves the 1/8-resolution feature map three times, so a frame (after
 # padding to multiples of 8) must be at least 8 × 8 = 64 pixels on each side.
 MIN_SIDE = 64
+# The shipped weights' input scale (MODEL_CARD.md): frames are enlarged by this factor before RAFT runs, so
+# its 1/8-resolution grid is finer relative to the camera's pixels, and the flow is shrunk back.
+DEFAULT_INPUT_SCALE = 1.0
+
+
+def zoom_frame(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """H×W×3 frame resized to ``size`` (width, height) as float32 0..255, bicubic (training zooms the same way)."""
+    import cv2
+
+    out = cv2.resize(np.asarray(img, dtype=np.float32), (int(size[0]), int(size[1])), interpolation=cv2.INTER_CUBIC)
+    return np.clip(out, 0.0, 255.0, out=out)
+
+
+def scaled_size(h: int, w: int, scale: float) -> tuple[int, int]:
+    """(height, width) of an ``h``×``w`` frame enlarged by ``scale``."""
+    return max(1, round(h * scale)), max(1, round(w * scale))
 
 
 def forward_interpolate(flow_low: torch.Tensor) -> torch.Tensor:
@@ -48,18 +64,24 @@ class RaftBackend:
     ``companion/flow/weights/raft-small-flowgap.pth``), ``iters`` refinement iterations (12), ``warm_start``
     (start each pair from the previous pair's flow, carried forward), ``device`` ("cpu", "cuda", ...),
     ``num_threads`` (torch intra-op threads on CPU; None leaves the setting alone), ``random_init_seed``
-    (build seeded random weights instead of loading a file: for timing and tests only).
+    (build seeded random weights instead of loading a file: for timing and tests only), ``input_scale``
+    (enlarge both frames by this factor before RAFT and shrink the flow back: finer flow for about
+    ``input_scale**2`` times the compute; the default is the shipped weights' own, :data:`DEFAULT_INPUT_SCALE`).
     """
 
     name = "raft"
 
     def __init__(self, variant: str | None = None, weights: str | Path | None = None, iters: int = 12,
                  warm_start: bool = False, device: str = "cpu", num_threads: int | None = None,
-                 random_init_seed: int | None = None, padding_mode: str = "sintel") -> None:
+                 random_init_seed: int | None = None, padding_mode: str = "sintel",
+                 input_scale: float = DEFAULT_INPUT_SCALE) -> None:
         if num_threads is not None:
             torch.set_num_threads(int(num_threads))
         if iters < 0:
             raise ValueError("iters must be >= 0")
+        if not (np.isfinite(input_scale) and 0.25 <= input_scale <= 4.0):
+            raise ValueError(f"input_scale must be within 0.25..4 (got {input_scale})")
+        self.input_scale = float(input_scale)
         self.iters = int(iters)
         self.warm_start = bool(warm_start)
         self.padding_mode = padding_mode
@@ -101,30 +123,58 @@ class RaftBackend:
         """Forget the warm-start state (start of a new sequence)."""
         self._previous_low = None
 
-    def _to_tensor(self, img: np.ndarray) -> torch.Tensor:
-        return torch.from_numpy(np.ascontiguousarray(img)).permute(2, 0, 1).float().unsqueeze(0).to(self._device)
-
     @torch.inference_mode()
     def estimate(self, img1: np.ndarray, img2: np.ndarray, flow_init: np.ndarray | None = None,
                  iters: int | None = None) -> np.ndarray:
         """H×W×2 float32 flow.  ``flow_init``: a full-resolution initial flow (e.g. the previous result)."""
         h, w = check_pair(img1, img2)
-        padder = InputPadder((h, w), mode=self.padding_mode)
-        if min(padder.padded_size) < MIN_SIDE:
-            raise ValueError(f"RAFT needs frames of at least {MIN_SIDE}×{MIN_SIDE} pixels (its correlation pyramid "
-                             f"has 4 levels at 1/8 resolution); got {w}×{h}: use a larger camera or the dis backend")
-        t1, t2 = padder.pad(self._to_tensor(img1), self._to_tensor(img2))
-        ph, pw = padder.padded_size
-        init = None
-        if flow_init is not None:
-            fi = torch.from_numpy(check_flow(flow_init, (h, w))).permute(2, 0, 1).unsqueeze(0).to(self._device)
-            (fi,) = padder.pad(fi)
-            init = F.avg_pool2d(fi, 8) / 8.0                   # full-res pixels -> 1/8-res cells
-        elif self.warm_start and self._previous_low is not None \
-                and self._previous_low.shape[-2:] == (ph // 8, pw // 8):
-            init = forward_interpolate(self._previous_low)
-        out = self.model(t1, t2, iters=self.iters if iters is None else int(iters), flow_init=init)
+        init = None if flow_init is None else check_flow(flow_init, (h, w))
+        previous = self._previous_low if self.warm_start else None
+        flow, low = estimate_flow(self.model, img1, img2, iters=self.iters if iters is None else int(iters),
+                                  input_scale=self.input_scale, flow_init=init, previous_low=previous,
+                                  padding_mode=self.padding_mode, device=self._device)
         if self.warm_start:
-            self._previous_low = out.flow_low
-        flow = padder.unpad(out.flow_up)[0].permute(1, 2, 0)
-        return np.ascontiguousarray(flow.float().cpu().numpy(), dtype=np.float32)
+            self._previous_low = low
+        return flow
+
+
+def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float = 1.0,
+                  flow_init: np.ndarray | None = None, previous_low: torch.Tensor | None = None,
+                  padding_mode: str = "sintel", device: torch.device | str = "cpu") -> tuple[np.ndarray, torch.Tensor]:
+    """(H×W×2 float32 flow, 1/8-resolution flow) of ``model`` for one pair of H×W×3 frames.
+
+    The frames are enlarged by ``input_scale`` (when not 1) and padded to multiples of 8; the flow is
+    unpadded, shrunk back and rescaled to the frames' pixels.  ``flow_init`` is a full-resolution initial
+    flow; ``previous_low`` a previous 1/8-resolution result to warm-start from (carried forward), used
+    only when its grid matches.  Shared by :class:`RaftBackend` and ``flowgap-train-raft``'s validation.
+    """
+    import cv2
+
+    h, w = img1.shape[:2]
+    zh, zw = (h, w) if input_scale == 1.0 else scaled_size(h, w, input_scale)
+    padder = InputPadder((zh, zw), mode=padding_mode)
+    if min(padder.padded_size) < MIN_SIDE:
+        raise ValueError(f"RAFT needs frames of at least {MIN_SIDE}×{MIN_SIDE} pixels (its correlation pyramid "
+                         f"has 4 levels at 1/8 resolution); got {w}×{h}: use a larger camera or the dis backend")
+    sx, sy = zw / w, zh / h
+    if (zh, zw) != (h, w):
+        img1, img2 = zoom_frame(img1, (zw, zh)), zoom_frame(img2, (zw, zh))
+        if flow_init is not None:
+            flow_init = cv2.resize(flow_init, (zw, zh), interpolation=cv2.INTER_LINEAR) * np.float32([sx, sy])
+
+    def tensor(a: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(a)).permute(2, 0, 1).float().unsqueeze(0).to(device)
+
+    t1, t2 = padder.pad(tensor(img1), tensor(img2))
+    ph, pw = padder.padded_size
+    init = None
+    if flow_init is not None:
+        (fi,) = padder.pad(tensor(flow_init))
+        init = F.avg_pool2d(fi, 8) / 8.0                   # full-res pixels -> 1/8-res cells
+    elif previous_low is not None and previous_low.shape[-2:] == (ph // 8, pw // 8):
+        init = forward_interpolate(previous_low)
+    out = model(t1, t2, iters=iters, flow_init=init)
+    flow = np.ascontiguousarray(padder.unpad(out.flow_up)[0].permute(1, 2, 0).float().cpu().numpy(), dtype=np.float32)
+    if (zh, zw) != (h, w):
+        flow = cv2.resize(flow, (w, h), interpolation=cv2.INTER_AREA) / np.float32([sx, sy])
+    return np.ascontiguousarray(flow, dtype=np.float32), out.flow_low
