@@ -197,9 +197,13 @@ def zoom_pair(img1: np.ndarray, img2: np.ndarray, flow: np.ndarray, valid: np.nd
 
 
 def validation_set(size: int = DEFAULT_VALIDATION_SIZE, width: int = DEFAULT_WIDTH,
-                   height: int = DEFAULT_HEIGHT) -> RenderedFlowDataset:
-    """The fixed held-out validation pairs (seed :data:`VALIDATION_SEED`, no exposure jitter)."""
-    return RenderedFlowDataset(seed=VALIDATION_SEED, length=size, width=width, height=height,
+                   height: int = DEFAULT_HEIGHT, seed: int = VALIDATION_SEED) -> RenderedFlowDataset:
+    """The fixed held-out validation pairs (seed :data:`VALIDATION_SEED`, no exposure jitter).
+
+    Another ``seed`` gives an equally built held-out set, e.g. for choosing an inference setting without
+    touching the validation pairs.
+    """
+    return RenderedFlowDataset(seed=seed, length=size, width=width, height=height,
                                pairs_per_scene=4, exposure_jitter=0.0)
 
 

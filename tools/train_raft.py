@@ -43,6 +43,7 @@ from tools.raft_data import (
     DEFAULT_HEIGHT,
     DEFAULT_VALIDATION_SIZE,
     DEFAULT_WIDTH,
+    VALIDATION_SEED,
     RenderedFlowDataset,
     collate,
     validation_set,
@@ -349,14 +350,15 @@ def eval_only(args: argparse.Namespace) -> dict:
     layout = load_weights_into(model, args.eval_only, variant)
     model.to(device).eval()
     size = args.val_size or DEFAULT_VALIDATION_SIZE
-    result = evaluate(model, validation_set(size, args.width, args.height), args.val_iters, device, with_dis=True,
-                      input_scale=args.input_scale)
-    result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, **result}
+    pairs = validation_set(size, args.width, args.height, seed=args.val_seed)
+    result = evaluate(model, pairs, args.val_iters, device, with_dis=True, input_scale=args.input_scale)
+    result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, "seed": args.val_seed, **result}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    which = "validation" if args.val_seed == VALIDATION_SEED else f"seed-{args.val_seed}"
     print(f"EPE raft-{variant} {result['epe']:.3f} px, dis:medium {result['dis_medium_epe']:.3f} px "
-          f"({result['pairs']} validation pairs, {args.width}x{args.height}, {args.val_iters} iters, "
+          f"({result['pairs']} {which} pairs, {args.width}x{args.height}, {args.val_iters} iters, "
           f"input scale {args.input_scale:g}) "
           f"-> {out / 'eval.json'}")
     return result
@@ -420,6 +422,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--val-size", dest="val_size", type=int, default=DEFAULT_VALIDATION_SIZE,
                    help="validation pairs (fixed seed; 0 disables validation while training)")
     v.add_argument("--val-iters", dest="val_iters", type=int, default=12, help="RAFT iterations for validation")
+    v.add_argument("--val-seed", dest="val_seed", type=int, default=VALIDATION_SEED,
+                   help="with --eval-only: the held-out pairs' seed (another seed gives other held-out pairs, "
+                        "for tuning inference settings without touching the validation set)")
     v.add_argument("--input-scale", dest="input_scale", type=float, default=DEFAULT_INPUT_SCALE,
                    help="enlarge validation frames by this factor before RAFT, as the raft backend's "
                         "input_scale does")

@@ -36,7 +36,7 @@ def test_model_card_epe_is_reproduced(tmp_path):
     val = json.loads(CARD_RESULTS.read_text())      # as `--eval-only` wrote it when the weights were made
     argv = ["--eval-only", str(DEFAULT_WEIGHTS), "--out", str(tmp_path), "--threads", "2",
             "--val-size", str(val["pairs"]), "--width", str(val["width"]), "--height", str(val["height"]),
-            "--val-iters", str(val["iters"])]
+            "--val-iters", str(val["iters"]), "--input-scale", str(val.get("input_scale", 1.0))]
     assert train_raft.main(argv) == 0
     result = json.loads((tmp_path / "eval.json").read_text())
     assert result["pairs"] == val["pairs"] and result["valid_pixels"] == val["valid_pixels"]

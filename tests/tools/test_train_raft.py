@@ -269,6 +269,12 @@ def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     zoomed = json.loads((tmp_path / "zoomed" / "eval.json").read_text())
     assert zoomed["input_scale"] == 1.5 and zoomed["valid_pixels"] == result["valid_pixels"]
     assert zoomed["epe"] != result["epe"] and zoomed["dis_medium_epe"] == result["dis_medium_epe"]
+    rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
+                          "--height", "64", "--val-size", "2", "--val-iters", "2", "--val-seed", "7",
+                          "--out", str(tmp_path / "other")])
+    assert rc == 0 and "2 seed-7 pairs" in capsys.readouterr().out
+    other = json.loads((tmp_path / "other" / "eval.json").read_text())
+    assert other["seed"] == 7 and other["epe"] != result["epe"]
 
 
 # ---------------------------------------------------------------------------------------------------------
