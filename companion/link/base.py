@@ -24,6 +24,33 @@ class LinkLost(LinkError):
     """No heartbeat from the autopilot within the link timeout."""
 
 
+class StatusTextAssembler:
+    """Joins MAVLink 2 STATUSTEXT chunks back into whole texts.
+
+    A text over 50 bytes arrives as chunks sharing an ``id`` > 0 with rising ``chunk_seq``; the last one is
+    shorter than 50 bytes (an empty chunk ends a text that fills its last chunk exactly).  ``add`` returns
+    the whole text once it is complete, else None.  A chunk 0 restarts its id (the sender reused it after
+    a chunk was lost), and at most ``max_pending`` unfinished texts are kept, oldest dropped first.
+    """
+
+    def __init__(self, max_pending: int = 16) -> None:
+        self.max_pending = max_pending
+        self._pending: dict[int, list[str]] = {}
+
+    def add(self, text_id: int, chunk_seq: int, text: str) -> str | None:
+        if not text_id:
+            return text
+        if chunk_seq == 0:
+            self._pending.pop(text_id, None)
+        parts = self._pending.setdefault(text_id, [])
+        parts.append(text)
+        if len(text.encode()) >= 50:
+            while len(self._pending) > self.max_pending:
+                self._pending.pop(next(iter(self._pending)))
+            return None
+        return "".join(self._pending.pop(text_id))
+
+
 @dataclass(frozen=True)
 class Endpoint:
     """A parsed MAVLink endpoint URL."""

@@ -16,7 +16,7 @@ from pathlib import Path
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from companion.link.base import AutopilotLink, LinkError, parse_endpoint
+from companion.link.base import AutopilotLink, LinkError, StatusTextAssembler, parse_endpoint
 from companion.link.tlog import TlogWriter
 
 log = logging.getLogger(__name__)
@@ -51,7 +51,7 @@ class PymavlinkLink(AutopilotLink):
         self._target_component = 1
         self._autopilot_mav = None
         self._vehicle_type = None
-        self._chunks: dict[int, list[str]] = {}
+        self._texts = StatusTextAssembler()
         self.setpoint_times: list[float] = []  # monotonic send times, for rate checks
 
     # ---------------------------------------------------------------------------- lifecycle
@@ -152,7 +152,7 @@ class PymavlinkLink(AutopilotLink):
             with t.lock:
                 t.home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
         elif kind == "STATUSTEXT":
-            text = self._assemble(msg)
+            text = self._texts.add(getattr(msg, "id", 0), getattr(msg, "chunk_seq", 0), msg.text)
             if text is not None:
                 log.info("autopilot: %s", text)
                 with t.lock:
@@ -161,17 +161,6 @@ class PymavlinkLink(AutopilotLink):
             with self._ack_cond:
                 self._acks[msg.command] = (msg.result, time.monotonic())
                 self._ack_cond.notify_all()
-
-    def _assemble(self, msg) -> str | None:
-        """Reassemble MAVLink 2 STATUSTEXT chunks (id != 0); None while a text is incomplete."""
-        text_id = getattr(msg, "id", 0)
-        if not text_id:
-            return msg.text
-        parts = self._chunks.setdefault(text_id, [])
-        parts.append(msg.text)
-        if len(msg.text) == 50:
-            return None
-        return "".join(self._chunks.pop(text_id))
 
     # -------------------------------------------------------------------------------- send
     def _send(self, msg) -> None:

@@ -28,6 +28,36 @@ def test_bad_endpoint_urls_name_the_fix(url):
         parse_endpoint(url)
 
 
+@pytest.mark.parametrize("text", ["short", "y" * 50, "x" * 120 + " end", "z" * 100])
+def test_statustext_chunks_reassemble_as_the_vehicle_sends_them(text):
+    from companion.link.base import StatusTextAssembler
+    from sitl_vehicle.mavlink_io import statustext_messages
+
+    def wire(msg):  # the text as a receiver decodes it: bytes up to the first NUL
+        raw = msg.text if isinstance(msg.text, bytes) else msg.text.encode()
+        return raw.split(b"\0", 1)[0].decode()
+
+    texts = StatusTextAssembler()
+    other = statustext_messages(6, "w" * 70, 8)             # another long text interleaved with this one
+    mine = statustext_messages(6, text, 7)
+    out = [texts.add(m.id, m.chunk_seq, wire(m)) for m in [other[0], *mine, other[1]]]
+    assert [t for t in out if t is not None] == [text, "w" * 70]
+    assert out[-1] == "w" * 70 and out[len(mine)] == text and all(t is None for t in out[1:len(mine)])
+
+
+def test_statustext_assembler_restarts_an_id_and_bounds_what_it_keeps():
+    from companion.link.base import StatusTextAssembler
+
+    texts = StatusTextAssembler(max_pending=2)
+    assert texts.add(5, 0, "a" * 50) is None
+    assert texts.add(5, 0, "b" * 50) is None                # chunk 0 again: the earlier text was cut off
+    assert texts.add(5, 1, "end") == "b" * 50 + "end"
+    for text_id in (1, 2, 3):
+        texts.add(text_id, 0, "c" * 50)                      # never finished
+    assert texts.add(1, 1, "tail") == "tail"                # id 1 was dropped as the oldest
+    assert texts.add(3, 1, "tail") == "c" * 50 + "tail"
+
+
 def test_fly_with_the_link_and_keep_streaming_while_busy(vehicle_for_link, tmp_path):
     server, port, _ = vehicle_for_link()
     link = make_link(f"udpin://127.0.0.1:{port}", tlog_path=tmp_path / "link.tlog")

@@ -9,6 +9,7 @@ import time
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from companion.link.base import StatusTextAssembler
 from tools.square import recv_unlocked
 
 
@@ -39,19 +40,13 @@ class MavClient:
     def statustext(self, fragment: str, timeout: float = 5.0) -> str | None:
         """The first STATUSTEXT containing ``fragment``, reassembled from MAVLink 2 chunks (id, chunk_seq)."""
         deadline = time.monotonic() + timeout
-        partial: dict[int, list[str]] = {}
+        texts = StatusTextAssembler()
         while time.monotonic() < deadline:
             msg = self.recv("STATUSTEXT", max(0.0, deadline - time.monotonic()))
             if msg is None:
                 return None
-            if msg.id == 0:
-                text = msg.text
-            else:
-                partial.setdefault(msg.id, []).append(msg.text)
-                if len(msg.text) == 50:
-                    continue
-                text = "".join(partial.pop(msg.id))
-            if fragment in text:
+            text = texts.add(msg.id, msg.chunk_seq, msg.text)
+            if text is not None and fragment in text:
                 return text
         return None
 
