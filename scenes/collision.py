@@ -1,8 +1,9 @@
 """Collision geometry of a scene for the vehicle's physics loop (plain Python floats, called at 500 Hz).
 
 Solids: the wall slab ``wall_x <= x <= wall_x + thickness`` over the wall rectangle minus the openings,
-and each opening's frame band (standing ``frame_depth`` proud of the wall). The floor is NOT included
-(the vehicle's dynamics handles the ground). ``clearance(p)`` is the distance from the NED point ``p`` to
+each opening's frame band (standing ``frame_depth`` proud of the wall), and the background surface seen
+through the openings: its rectangle at ``background_x``, solid behind (a room's far wall). The floor is NOT
+included (the vehicle's dynamics handles the ground). ``clearance(p)`` is the distance from the NED point ``p`` to
 the nearest solid surface, negative inside a solid. 2-D signed distances in the wall's (y, z) plane are
 extruded along x; the wall's 2-D distance is ``max(d_rectangle, -d_opening)``, exact inside an opening
 (distance to the inner edges) and in front of the wall.
@@ -61,6 +62,15 @@ class _Polygon:
         return -d if inside else d
 
 
+def _box_distance(y: float, z: float, y_lo: float, y_hi: float, z_lo: float, z_hi: float) -> float:
+    """Signed distance from (y, z) to the rectangle [y_lo, y_hi] × [z_lo, z_hi], negative inside."""
+    qy = abs(y - 0.5 * (y_lo + y_hi)) - 0.5 * (y_hi - y_lo)
+    qz = abs(z - 0.5 * (z_lo + z_hi)) - 0.5 * (z_hi - z_lo)
+    if qy > 0.0 or qz > 0.0:
+        return math.sqrt(max(qy, 0.0) ** 2 + max(qz, 0.0) ** 2)
+    return qy if qy > qz else qz
+
+
 def _extrude(d2: float, dx: float) -> float:
     """Signed distance of a 2-D shape (signed distance d2) extruded over an x interval (signed dx)."""
     if d2 <= 0.0 and dx <= 0.0:
@@ -71,7 +81,8 @@ def _extrude(d2: float, dx: float) -> float:
 
 
 class SceneCollision:
-    """Scene solids for the vehicle: ``clearance((x, y, z)) -> float`` and ``wall_x`` (front face x)."""
+    """Scene solids for the vehicle: ``clearance((x, y, z)) -> float``, ``wall_x`` (front face x) and
+    ``background_x`` (the background surface's x)."""
 
     def __init__(self, spec: SceneSpec) -> None:
         w = spec.wall
@@ -80,19 +91,16 @@ class SceneCollision:
         self.wall_back_x: float = float(spec.wall_back_x)
         self._y_lo, self._y_hi = w.center_y - w.width / 2, w.center_y + w.width / 2
         self._z_lo, self._z_hi = -w.height, 0.0
+        bg = spec.background
+        self.background_x: float = float(spec.background_x)
+        self._bg = (w.center_y - bg.width / 2, w.center_y + bg.width / 2, -bg.height, 0.0)  # as scenes.build lays it
         self._openings = [_Polygon(op.polygon()) for op in spec.openings]
         self._frames = [(poly, float(op.frame_width), self.wall_x - float(op.frame_depth))
                         for poly, op in zip(self._openings, spec.openings, strict=True) if op.frame_width > 0]
 
     def clearance(self, p: tuple[float, float, float]) -> float:
         x, y, z = float(p[0]), float(p[1]), float(p[2])
-        # wall rectangle (2-D box sdf)
-        qy = abs(y - 0.5 * (self._y_lo + self._y_hi)) - 0.5 * (self._y_hi - self._y_lo)
-        qz = abs(z - 0.5 * (self._z_lo + self._z_hi)) - 0.5 * (self._z_hi - self._z_lo)
-        if qy > 0.0 or qz > 0.0:
-            d_rect = math.sqrt(max(qy, 0.0) ** 2 + max(qz, 0.0) ** 2)
-        else:
-            d_rect = qy if qy > qz else qz
+        d_rect = _box_distance(y, z, self._y_lo, self._y_hi, self._z_lo, self._z_hi)
         d2 = d_rect
         for poly in self._openings:
             # the opening can only change max(d_rect, -s) if it is nearer than |d_rect|
@@ -111,7 +119,8 @@ class SceneCollision:
             d = _extrude(d2f, dxf)
             if d < best:
                 best = d
-        return best
+        d = _extrude(_box_distance(y, z, *self._bg), self.background_x - x)
+        return d if d < best else best
 
     def __repr__(self) -> str:
         return f"SceneCollision({self.spec.name!r}, wall_x={self.wall_x})"

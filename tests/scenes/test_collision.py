@@ -16,8 +16,11 @@ def test_window1_clearances():
     assert c.clearance((3.07, 0.3, -1.4)) == pytest.approx(0.15)         # inside, near the right edge
     assert c.clearance((3.05, 1.5, -1.5)) == pytest.approx(-0.05)        # inside the slab
     assert c.clearance((3.1, 0.6, -1.5)) == pytest.approx(-0.05)         # slab beside the opening
-    assert c.clearance((5.0, 0.0, -1.5)) == pytest.approx(1.85 + 0.0, abs=0.5)
     assert c.clearance((4.15, 1.5, -1.5)) == pytest.approx(1.0)          # behind the wall
+    assert c.background_x == 5.15                                         # background 2 m behind the back face
+    assert c.clearance((4.65, 0.0, -1.5)) == pytest.approx(0.5)          # through the opening, before it
+    assert c.clearance((5.25, 0.0, -1.5)) == pytest.approx(-0.1)         # behind the background surface
+    assert c.clearance((5.25, 3.5 + 0.3, -1.5)) == pytest.approx(0.3)    # beside its edge (7 m wide)
     assert c.clearance((2.0, 1.5, -0.01)) == pytest.approx(1.0)          # the floor is not a solid here
 
 
