@@ -22,7 +22,12 @@ from sitl_vehicle.sim import Setpoint
 log = logging.getLogger(__name__)
 NAN = math.nan
 
-OBL_ACTION_LAND = 4  # COM_OBL_RC_ACT value for Land; everything else holds position
+# COM_OBL_RC_ACT values for Return and Land; the others (Position, Altitude, Manual need RC) hold position
+OBL_ACTION_RETURN = 3
+OBL_ACTION_LAND = 4
+
+# Return mode's legs, in order (PX4's RTL: climb, fly home at the return altitude, descend, wait, land)
+RTL_CLIMB, RTL_RETURN, RTL_DESCEND, RTL_LOITER, RTL_LAND = "climb", "return", "descend", "loiter", "land"
 
 
 @dataclass(frozen=True)
@@ -60,7 +65,11 @@ class CommanderOutput:
 
 
 class Commander:
-    """PX4-like commander/navigator for Takeoff, Hold, Land and Offboard."""
+    """PX4-like commander/navigator for Takeoff, Hold, Land, Return and Offboard.
+
+    ``home`` (local NED) is where the vehicle last armed on the ground, as PX4 sets it; Takeoff altitudes
+    and Return are relative to it.
+    """
 
     def __init__(self, params: ParameterStore, home: tuple[float, float, float] = (0.0, 0.0, 0.0)):
         self.params = params
@@ -78,6 +87,10 @@ class Commander:
         self._land_xy: tuple[float, float] | None = None
         self._offboard_setpoint: Setpoint | None = None
         self._offboard_time = -math.inf
+        self._rtl_leg: str | None = None
+        self._rtl_start_xy = (0.0, 0.0)
+        self._rtl_z = 0.0
+        self._rtl_loiter_since = 0.0
 
     # ----------------------------------------------------------------------------------- requests
     def arm(self, status: VehicleStatus, force: bool = False) -> Reply:
@@ -88,6 +101,8 @@ class Commander:
             if reason:
                 return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, f"Arming denied: {reason}")
         self.armed = True
+        if status.landed:
+            self.home = status.position
         self._armed_at = status.time_s
         self._has_flown = False
         self._landed_since = status.time_s if status.landed else None
@@ -110,6 +125,8 @@ class Commander:
                                 "Switching to Offboard is currently not possible: no setpoint stream")
         if mode is FlightMode.AUTO_TAKEOFF:
             return self.takeoff(status, NAN)
+        if mode is FlightMode.AUTO_RTL:
+            return self.return_to_launch(status)
         self.failsafe = False
         self._enter(mode, status)
         return ACCEPTED
@@ -132,6 +149,15 @@ class Commander:
         self._enter(FlightMode.AUTO_LAND, status)
         return ACCEPTED
 
+    def return_to_launch(self, status: VehicleStatus) -> Reply:
+        """Return mode: climb to RTL_RETURN_ALT above home (never down), fly home, descend to
+        RTL_DESCEND_ALT, hover RTL_LAND_DELAY s, land."""
+        if not self.armed or status.landed:
+            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Return denied: not flying")
+        self.failsafe = False
+        self._enter(FlightMode.AUTO_RTL, status)
+        return ACCEPTED
+
     def offboard_setpoint(self, setpoint: Setpoint, time_s: float) -> None:
         """A valid offboard setpoint arrived (the MAVLink edge has already rejected malformed ones)."""
         self._offboard_setpoint = setpoint
@@ -151,7 +177,14 @@ class Commander:
                 self._say(mavlink.MAV_SEVERITY_INFO, "Takeoff complete: holding")
                 self._hold_target, self._hold_yaw = self._takeoff_target, status.yaw
                 self.mode = FlightMode.AUTO_LOITER
+        if self.mode is FlightMode.AUTO_RTL and self.armed:
+            self._advance_return(status)
         return CommanderOutput(self.armed, self._setpoint(status), self.mode)
+
+    @property
+    def landing(self) -> bool:
+        """Descending to land (Land mode, or Return's last leg)."""
+        return self.mode is FlightMode.AUTO_LAND or (self.mode is FlightMode.AUTO_RTL and self._rtl_leg == RTL_LAND)
 
     # ---------------------------------------------------------------------------------- internals
     def _setpoint(self, status: VehicleStatus) -> Setpoint:
@@ -159,7 +192,9 @@ class Commander:
             return self._offboard_setpoint
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
             return Setpoint(position=self._takeoff_target, yaw=self._hold_yaw)
-        if self.mode is FlightMode.AUTO_LAND or (status.landed and not self._climb_requested()):
+        if self.mode is FlightMode.AUTO_RTL and not self.landing:
+            return Setpoint(position=self._return_target(), yaw=self._hold_yaw)
+        if self.landing or (status.landed and not self._climb_requested()):
             # Descend (on the ground: keep pressing down, so the thrust winds down to idle).
             x, y = self._land_xy or status.position[:2]
             return Setpoint(position=(x, y, NAN), velocity=(NAN, NAN, self.params["MPC_LAND_SPEED"]),
@@ -179,6 +214,42 @@ class Commander:
             self._hold_target = _stopping_point(status.position, status.velocity)
         elif mode is FlightMode.AUTO_LAND:
             self._land_xy = status.position[:2]
+        elif mode is FlightMode.AUTO_RTL:
+            self._rtl_leg = RTL_CLIMB
+            self._rtl_start_xy = status.position[:2]
+            self._rtl_z = min(status.position[2], self.home[2] - self.params["RTL_RETURN_ALT"])  # NED: up is -z
+            self._say(mavlink.MAV_SEVERITY_INFO, f"Return: flying home at {self.home[2] - self._rtl_z:.1f} m "
+                                                 "above home")
+
+    def _descend_z(self) -> float:
+        return max(self._rtl_z, self.home[2] - self.params["RTL_DESCEND_ALT"])  # descending never climbs
+
+    def _return_target(self) -> tuple[float, float, float]:
+        hx, hy, _ = self.home
+        if self._rtl_leg == RTL_CLIMB:
+            return (*self._rtl_start_xy, self._rtl_z)
+        if self._rtl_leg == RTL_RETURN:
+            return (hx, hy, self._rtl_z)
+        return (hx, hy, self._descend_z())
+
+    def _advance_return(self, status: VehicleStatus) -> None:
+        """Move to Return's next leg once the current one's target is reached (within NAV_ACC_RAD)."""
+        x, y, z = status.position
+        reached = self.params["NAV_ACC_RAD"]
+        hx, hy, _ = self.home
+        if self._rtl_leg == RTL_CLIMB and abs(z - self._rtl_z) <= reached:
+            self._rtl_leg = RTL_RETURN
+        if self._rtl_leg == RTL_RETURN and math.hypot(x - hx, y - hy) <= reached:
+            self._rtl_leg = RTL_DESCEND
+        if self._rtl_leg == RTL_DESCEND and abs(z - self._descend_z()) <= reached:
+            self._rtl_leg = RTL_LOITER
+            self._rtl_loiter_since = status.time_s
+        if self._rtl_leg == RTL_LOITER:
+            delay = self.params["RTL_LAND_DELAY"]
+            if delay >= 0 and status.time_s - self._rtl_loiter_since >= delay:
+                self._rtl_leg = RTL_LAND
+                self._land_xy = (hx, hy)
+                self._say(mavlink.MAV_SEVERITY_INFO, "Return: landing at home")
 
     def _update_land_detector(self, status: VehicleStatus) -> None:
         now = status.time_s
@@ -203,7 +274,10 @@ class Commander:
     def _offboard_lost(self, status: VehicleStatus) -> None:
         self.failsafe = True
         action = int(self.params["COM_OBL_RC_ACT"])
-        target = FlightMode.AUTO_LAND if action == OBL_ACTION_LAND else FlightMode.AUTO_LOITER
+        target = {OBL_ACTION_LAND: FlightMode.AUTO_LAND, OBL_ACTION_RETURN: FlightMode.AUTO_RTL}.get(
+            action, FlightMode.AUTO_LOITER)
+        if target is FlightMode.AUTO_RTL and status.landed:
+            target = FlightMode.AUTO_LOITER
         self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: offboard lost, switching to {target.label}")
         self._enter(target, status)
 
@@ -217,8 +291,8 @@ class Commander:
             return "position estimate not valid yet"
         if not status.landed:
             return "vehicle is not landed"
-        if self.mode is FlightMode.AUTO_LAND:
-            return "Land mode is not armable; switch to Hold or Offboard"
+        if self.mode in (FlightMode.AUTO_LAND, FlightMode.AUTO_RTL):
+            return f"{self.mode.label} mode is not armable; switch to Hold or Offboard"
         if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(status.time_s):
             return "no offboard setpoint stream"
         return None

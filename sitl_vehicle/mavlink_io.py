@@ -336,7 +336,7 @@ class MavlinkVehicleInterface:
             landed = mavlink.MAV_LANDED_STATE_ON_GROUND if t.landed else mavlink.MAV_LANDED_STATE_IN_AIR
             if not t.landed and t.mode is FlightMode.AUTO_TAKEOFF:
                 landed = mavlink.MAV_LANDED_STATE_TAKEOFF
-            elif not t.landed and t.mode is FlightMode.AUTO_LAND:
+            elif not t.landed and self.commander.landing:
                 landed = mavlink.MAV_LANDED_STATE_LANDING
             return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
         if name == "ATTITUDE":
@@ -361,9 +361,11 @@ class MavlinkVehicleInterface:
             return mavlink.MAVLink_vfr_hud_message(ground_speed, ground_speed, int(math.degrees(t.euler[2]) % 360),
                                                    int(t.throttle * 100), alt, -t.velocity[2])
         if name == "HOME_POSITION":
+            hx, hy, hz = self.commander.home             # where the vehicle last armed, in the local frame
+            lat, lon, alt = self.home.to_global((hx, hy, hz))
             return mavlink.MAVLink_home_position_message(
-                int(self.home.lat_deg * 1e7), int(self.home.lon_deg * 1e7), int(self.home.alt_m * 1000),
-                0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(t.time_s * 1e6))
+                int(lat * 1e7), int(lon * 1e7), int(alt * 1000),
+                hx, hy, hz, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(t.time_s * 1e6))
         if name == "BATTERY_STATUS":
             voltages = [4050] * 4 + [65535] * 6
             return mavlink.MAVLink_battery_status_message(
@@ -431,10 +433,12 @@ class MavlinkVehicleInterface:
             force = math.isfinite(p[1]) and int(p[1]) == FORCE_ARM_MAGIC
             return c.arm(status, force) if p[0] == 1.0 else c.disarm(status, force)
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
-            above_home = p[6] - self.home.alt_m if math.isfinite(p[6]) else math.nan
+            above_home = p[6] - self.home.to_global(c.home)[2] if math.isfinite(p[6]) else math.nan
             return c.takeoff(status, above_home)
         if command == mavlink.MAV_CMD_NAV_LAND:
             return c.land(status)
+        if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            return c.return_to_launch(status)
         if command == mavlink.MAV_CMD_DO_SET_MODE:
             if not math.isfinite(p[0]) or not int(p[0]) & mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
                 return Reply(mavlink.MAV_RESULT_DENIED, "Mode change denied: set MAV_MODE_FLAG_CUSTOM_MODE_ENABLED")

@@ -36,6 +36,7 @@ class FlightMode(enum.Enum):
     AUTO_TAKEOFF = (MAIN_AUTO, SUB_AUTO_TAKEOFF, "Takeoff")
     AUTO_LOITER = (MAIN_AUTO, SUB_AUTO_LOITER, "Hold")
     AUTO_LAND = (MAIN_AUTO, SUB_AUTO_LAND, "Land")
+    AUTO_RTL = (MAIN_AUTO, SUB_AUTO_RTL, "Return")
     OFFBOARD = (MAIN_OFFBOARD, 0, "Offboard")
 
     @property
@@ -63,7 +64,7 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
 
     PX4 treats AUTO with sub mode 0 as Hold-like ready state; we map it to Hold. Modes that need an RC
     link (Manual, Stabilized, Acro, Altitude, Position) are refused, as PX4 refuses them without RC;
-    Mission and Return are not implemented (the README says so).
+    Mission is not implemented (the README says so).
     """
     for mode in FlightMode:
         main, sub, _ = mode.value

@@ -84,11 +84,15 @@ COMMANDER_PARAMS = [
     ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.5, 100.0, "m", "Takeoff altitude above home"),
     ParamSpec("COM_OF_LOSS_T", 1.0, 0.05, 60.0, "s", "Offboard setpoint timeout before failsafe"),
     ParamSpec("COM_OBL_RC_ACT", 5.0, 0.0, 7.0, "enum",
-              "Offboard loss action: 4 = Land, 5 = Hold (other PX4 values fall back to Hold)"),
+              "Offboard loss action: 3 = Return, 4 = Land, 5 = Hold (other PX4 values fall back to Hold)"),
     ParamSpec("COM_DISARM_LAND", 2.0, -1.0, 20.0, "s", "Auto-disarm this long after landing (<0: off)"),
     ParamSpec("COM_DISARM_PRFLT", 10.0, -1.0, 60.0, "s", "Auto-disarm if no takeoff this long after arming"),
     ParamSpec("MPC_LAND_SPEED", 0.7, 0.2, 2.0, "m/s", "Landing descent speed"),
-    ParamSpec("NAV_ACC_RAD", 0.1, 0.02, 5.0, "m", "Takeoff acceptance radius (altitude reached)"),
+    ParamSpec("NAV_ACC_RAD", 0.1, 0.02, 5.0, "m", "Acceptance radius of Takeoff and Return waypoints"),
+    ParamSpec("RTL_RETURN_ALT", 60.0, 0.0, 150.0, "m", "Return: climb to at least this altitude above home"),
+    ParamSpec("RTL_DESCEND_ALT", 30.0, 0.5, 100.0, "m", "Return: descend to this altitude above home, then land"),
+    ParamSpec("RTL_LAND_DELAY", 0.0, -1.0, 300.0, "s", "Return: hover this long above home before landing "
+              "(<0: hover until told otherwise)"),
     ParamSpec("SYS_AUTOSTART", 4001.0, 0.0, 1e6, "", "Airframe id (4001: generic quadrotor X)"),
 ]
 

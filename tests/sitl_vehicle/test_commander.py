@@ -71,7 +71,7 @@ def test_offboard_needs_a_live_stream(commander):
 
 
 @pytest.mark.parametrize("action, expected", [(5.0, FlightMode.AUTO_LOITER), (4.0, FlightMode.AUTO_LAND),
-                                              (0.0, FlightMode.AUTO_LOITER)])
+                                              (3.0, FlightMode.AUTO_RTL), (0.0, FlightMode.AUTO_LOITER)])
 def test_offboard_loss_failsafe_action(commander, action, expected):
     commander.params.set("COM_OBL_RC_ACT", action)
     commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, -1.0)), 0.0)
@@ -102,6 +102,57 @@ def test_land_descends_then_auto_disarms(commander):
     assert not out.armed
 
 
+def at(t, x, y, z, landed=False, **kw) -> VehicleStatus:
+    return VehicleStatus(time_s=t, position=(x, y, z), velocity=(0.0, 0.0, 0.0), yaw=0.0, armed=True,
+                         landed=landed, **kw)
+
+
+def test_home_is_where_the_vehicle_armed(commander):
+    commander.arm(at(0.0, 1.0, 2.0, -0.01, landed=True))
+    assert commander.home == (1.0, 2.0, -0.01)
+    commander.takeoff(at(0.1, 1.0, 2.0, -0.01, landed=True), math.nan)
+    assert commander.update(at(0.2, 1.0, 2.0, -0.01, landed=True)).setpoint.position == (1.0, 2.0, -2.51)
+
+
+def test_return_climbs_flies_home_descends_waits_and_lands(commander):
+    for name, value in (("RTL_RETURN_ALT", 5.0), ("RTL_DESCEND_ALT", 3.0), ("RTL_LAND_DELAY", 1.0)):
+        commander.params.set(name, value)
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    assert commander.return_to_launch(at(0.5, 0.0, 0.0, 0.0, landed=True)).result == \
+        mavlink.MAV_RESULT_TEMPORARILY_REJECTED                  # on the ground: nothing to return from
+    assert commander.return_to_launch(at(10.0, 4.0, 3.0, -2.0)).accepted
+    legs = [
+        (at(10.1, 4.0, 3.0, -2.0), (4.0, 3.0, -5.0)),           # climb where it is
+        (at(13.0, 4.0, 3.0, -4.95), (0.0, 0.0, -5.0)),          # at altitude: fly home
+        (at(16.0, 2.0, 1.5, -5.0), (0.0, 0.0, -5.0)),
+        (at(19.0, 0.05, 0.0, -5.0), (0.0, 0.0, -3.0)),          # over home: descend to RTL_DESCEND_ALT
+        (at(21.0, 0.0, 0.0, -3.02), (0.0, 0.0, -3.0)),          # there: wait RTL_LAND_DELAY
+        (at(21.9, 0.0, 0.0, -3.0), (0.0, 0.0, -3.0)),
+    ]
+    for state, target in legs:
+        out = commander.update(state)
+        assert out.mode is FlightMode.AUTO_RTL and out.setpoint.position == pytest.approx(target), state
+        assert not commander.landing
+    out = commander.update(at(22.1, 0.0, 0.0, -3.0))
+    assert commander.landing and math.isnan(out.setpoint.position[2]) and out.setpoint.position[:2] == (0.0, 0.0)
+    assert out.setpoint.velocity[2] == pytest.approx(0.7)
+    texts = [text for _, text in commander.messages]
+    assert any("Return: flying home at 5.0 m" in t for t in texts) and "Return: landing at home" in texts
+    commander.update(at(26.0, 0.0, 0.0, 0.0, landed=True))
+    assert not commander.update(at(28.1, 0.0, 0.0, 0.0, landed=True)).armed          # COM_DISARM_LAND
+    assert "Return mode is not armable" in commander.arm(at(30.0, 0.0, 0.0, 0.0, landed=True)).text
+
+
+def test_return_from_above_the_return_altitude_keeps_it_and_never_climbs_to_descend(commander):
+    commander.params.set("RTL_RETURN_ALT", 5.0)
+    commander.params.set("RTL_DESCEND_ALT", 30.0)           # higher than the return altitude: stay at 8 m
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.set_mode(FlightMode.AUTO_RTL, at(1.0, 3.0, 0.0, -8.0))
+    assert commander.update(at(1.1, 3.0, 0.0, -8.0)).setpoint.position == (0.0, 0.0, -8.0)
+    out = commander.update(at(5.0, 0.0, 0.0, -8.0))        # home, already at the descend altitude and
+    assert commander.landing and out.setpoint.position[:2] == (0.0, 0.0)   # RTL_LAND_DELAY 0: land now
+
+
 def test_preflight_auto_disarm_without_takeoff(commander):
     commander.arm(status(t=0.0))
     assert commander.update(status(t=9.9)).armed
@@ -119,7 +170,7 @@ def test_px4_mode_encoding_matches_pymavlink():
         main, sub = decode_custom_mode(mode.custom_mode)
         assert mode_from_custom(main, sub) is mode
     names = {FlightMode.AUTO_TAKEOFF: "TAKEOFF", FlightMode.AUTO_LOITER: "LOITER", FlightMode.AUTO_LAND: "LAND",
-             FlightMode.OFFBOARD: "OFFBOARD"}
+             FlightMode.AUTO_RTL: "RTL", FlightMode.OFFBOARD: "OFFBOARD"}
     for mode, name in names.items():
         assert mavutil.interpret_px4_mode(mode.base_mode_flags, mode.custom_mode) == name
         base, main, sub = mavutil.px4_map[name]

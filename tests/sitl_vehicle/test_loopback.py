@@ -126,6 +126,42 @@ def test_offboard_loss_lands_when_configured(make_vehicle):
     assert not server.sim.crashed
 
 
+def test_offboard_loss_returns_home_when_configured(make_vehicle):
+    server, client = _offboard_hover(make_vehicle, COM_OBL_RC_ACT=3.0, RTL_RETURN_ALT=2.5, RTL_DESCEND_ALT=2.0)
+    client.stop_stream()
+    assert client.recv("HEARTBEAT", 5, lambda m: px4_mode_name(m) == "RTL") is not None
+    assert wait_until(lambda: not server.sim.armed, 40), "vehicle did not return, land and disarm"
+    x, y, z = server.sim.truth.position
+    assert math.hypot(x, y) < 0.15 and z > -0.05 and not server.sim.crashed
+
+
+def test_return_to_launch_command_flies_home_over_the_return_altitude(make_vehicle):
+    server, client = make_vehicle(params=(("RTL_RETURN_ALT", 3.0), ("RTL_DESCEND_ALT", 2.0),
+                                          ("RTL_LAND_DELAY", 0.5)))
+    take_off(client)
+    home = client.recv("HOME_POSITION", 3)
+    assert home is not None and abs(home.x) < 0.05 and abs(home.y) < 0.05 and abs(home.altitude - 488000) < 50
+    enter_offboard(client)
+    fly_leg(client, (0.0, 0.0, -ALT), (1.5, 1.0, -ALT), settle_s=0.5)
+    ack = client.command(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+    assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
+    client.stop_stream()
+    text = client.statustext("Return: flying home", 3)
+    assert text is not None and "3.0 m above home" in text
+    highest, samples = 0.0, []
+    while server.sim.armed:
+        msg = client.recv("LOCAL_POSITION_NED", 2.0)
+        assert msg is not None, "telemetry stopped"
+        samples.append((msg.x, msg.y, msg.z))
+        highest = max(highest, -msg.z)
+        assert len(samples) < 60 * 50, "no landing within a minute"
+    assert highest == pytest.approx(3.0, abs=0.1)                  # climbed to RTL_RETURN_ALT before going home
+    leaving = [p for p in samples if math.hypot(p[0] - 1.5, p[1] - 1.0) > 0.2]
+    assert leaving and all(-p[2] > 2.8 for p in leaving[:5])        # ... and only left at that altitude
+    x, y, z = server.sim.truth.position
+    assert math.hypot(x, y) < 0.15 and z > -0.05 and not server.sim.crashed
+
+
 def test_nan_and_unsupported_frame_setpoints_are_rejected_with_statustext(make_vehicle):
     server, client = make_vehicle()
     mask = 0b1001_1111_1000
