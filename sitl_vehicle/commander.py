@@ -25,6 +25,9 @@ NAN = math.nan
 # COM_OBL_RC_ACT values for Return and Land; the others (Position, Altitude, Manual need RC) hold position
 OBL_ACTION_RETURN = 3
 OBL_ACTION_LAND = 4
+# NAV_DLL_ACT (ground-station link loss) values: 0 none, 1 Hold, 2 Return, 3 Land, 5 terminate, 6 disarm
+DLL_ACTIONS = {1: FlightMode.AUTO_LOITER, 2: FlightMode.AUTO_RTL, 3: FlightMode.AUTO_LAND}
+DLL_STOP_MOTORS = (5, 6)
 
 # Return mode's legs, in order (PX4's RTL: climb, fly home at the return altitude, descend, wait, land)
 RTL_CLIMB, RTL_RETURN, RTL_DESCEND, RTL_LOITER, RTL_LAND = "climb", "return", "descend", "loiter", "land"
@@ -87,6 +90,8 @@ class Commander:
         self._land_xy: tuple[float, float] | None = None
         self._offboard_setpoint: Setpoint | None = None
         self._offboard_time = -math.inf
+        self._gcs_time: float | None = None  # last ground-station heartbeat (None: never connected)
+        self._gcs_lost = False
         self._rtl_leg: str | None = None
         self._rtl_start_xy = (0.0, 0.0)
         self._rtl_z = 0.0
@@ -158,6 +163,13 @@ class Commander:
         self._enter(FlightMode.AUTO_RTL, status)
         return ACCEPTED
 
+    def gcs_heartbeat(self, time_s: float) -> None:
+        """A ground station's HEARTBEAT arrived (the data link whose loss NAV_DLL_ACT acts on)."""
+        self._gcs_time = time_s
+        if self._gcs_lost:
+            self._gcs_lost = False
+            self._say(mavlink.MAV_SEVERITY_INFO, "Data link regained")
+
     def offboard_setpoint(self, setpoint: Setpoint, time_s: float) -> None:
         """A valid offboard setpoint arrived (the MAVLink edge has already rejected malformed ones)."""
         self._offboard_setpoint = setpoint
@@ -172,6 +184,8 @@ class Commander:
             self._update_land_detector(status)
         if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(now):
             self._offboard_lost(status)
+        if self._gcs_time is not None and not self._gcs_lost and now - self._gcs_time > self.params["COM_DL_LOSS_T"]:
+            self._data_link_lost(status)
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
             if abs(status.position[2] - self._takeoff_target[2]) <= self.params["NAV_ACC_RAD"]:
                 self._say(mavlink.MAV_SEVERITY_INFO, "Takeoff complete: holding")
@@ -279,6 +293,21 @@ class Commander:
         if target is FlightMode.AUTO_RTL and status.landed:
             target = FlightMode.AUTO_LOITER
         self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: offboard lost, switching to {target.label}")
+        self._enter(target, status)
+
+    def _data_link_lost(self, status: VehicleStatus) -> None:
+        """PX4's data-link-loss failsafe: only once a ground station had connected, only in the air."""
+        self._gcs_lost = True
+        self._say(mavlink.MAV_SEVERITY_CRITICAL, "Connection to ground station lost")
+        action = int(self.params["NAV_DLL_ACT"])
+        if not self.armed or status.landed or not (action in DLL_ACTIONS or action in DLL_STOP_MOTORS):
+            return
+        self.failsafe = True
+        if action in DLL_STOP_MOTORS:
+            self._disarm("Failsafe: data link lost, motors stopped")
+            return
+        target = DLL_ACTIONS[action]
+        self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: data link lost, switching to {target.label}")
         self._enter(target, status)
 
     def _offboard_alive(self, now: float) -> bool:

@@ -413,6 +413,10 @@ class MavlinkVehicleInterface:
         if reply.text and not reply.accepted:
             self.statustext(mavlink.MAV_SEVERITY_CRITICAL, reply.text, link)
 
+    def _on_heartbeat(self, msg, link: UdpLink) -> None:
+        if msg.type == mavlink.MAV_TYPE_GCS:
+            self.commander.gcs_heartbeat(self.status_fn().time_s)
+
     def _on_command_long(self, msg, link: UdpLink) -> None:
         if not self._for_me(msg) or msg.target_component not in (0, COMPONENT_ID):
             return

@@ -89,6 +89,9 @@ COMMANDER_PARAMS = [
     ParamSpec("COM_DISARM_PRFLT", 10.0, -1.0, 60.0, "s", "Auto-disarm if no takeoff this long after arming"),
     ParamSpec("MPC_LAND_SPEED", 0.7, 0.2, 2.0, "m/s", "Landing descent speed"),
     ParamSpec("NAV_ACC_RAD", 0.1, 0.02, 5.0, "m", "Acceptance radius of Takeoff and Return waypoints"),
+    ParamSpec("NAV_DLL_ACT", 0.0, 0.0, 6.0, "enum", "Ground-station link loss action: 0 = none, 1 = Hold, "
+              "2 = Return, 3 = Land, 5/6 = stop the motors (terminate/disarm)"),
+    ParamSpec("COM_DL_LOSS_T", 10.0, 1.0, 300.0, "s", "Ground-station heartbeat timeout before the link is lost"),
     ParamSpec("RTL_RETURN_ALT", 60.0, 0.0, 150.0, "m", "Return: climb to at least this altitude above home"),
     ParamSpec("RTL_DESCEND_ALT", 30.0, 0.5, 100.0, "m", "Return: descend to this altitude above home, then land"),
     ParamSpec("RTL_LAND_DELAY", 0.0, -1.0, 300.0, "s", "Return: hover this long above home before landing "

@@ -153,6 +153,43 @@ def test_return_from_above_the_return_altitude_keeps_it_and_never_climbs_to_desc
     assert commander.landing and out.setpoint.position[:2] == (0.0, 0.0)   # RTL_LAND_DELAY 0: land now
 
 
+@pytest.mark.parametrize("action, mode", [(1.0, FlightMode.AUTO_LOITER), (2.0, FlightMode.AUTO_RTL),
+                                          (3.0, FlightMode.AUTO_LAND)])
+def test_data_link_loss_failsafe_after_com_dl_loss_t(commander, action, mode):
+    commander.params.set("NAV_DLL_ACT", action)
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.offboard_setpoint(Setpoint(position=(1.0, 0.0, -2.0)), 0.5)
+    commander.set_mode(FlightMode.OFFBOARD, at(0.5, 0.0, 0.0, 0.0, landed=True))
+    commander.gcs_heartbeat(1.0)
+    for t in (2.0, 5.0, 11.0):
+        commander.offboard_setpoint(Setpoint(position=(1.0, 0.0, -2.0)), t)
+        assert commander.update(at(t, 1.0, 0.0, -2.0)).mode is FlightMode.OFFBOARD      # 10 s not yet over
+    commander.offboard_setpoint(Setpoint(position=(1.0, 0.0, -2.0)), 11.1)
+    out = commander.update(at(11.1, 1.0, 0.0, -2.0))
+    assert out.mode is mode and commander.failsafe
+    texts = [text for _, text in commander.messages]
+    assert "Connection to ground station lost" in texts and any("data link lost" in t for t in texts)
+    commander.gcs_heartbeat(12.0)
+    assert commander.messages[-1][1] == "Data link regained"
+    assert commander.update(at(12.1, 1.0, 0.0, -2.0)).mode is mode      # PX4 stays in the failsafe mode
+
+
+def test_data_link_loss_is_only_reported_when_disabled_never_connected_or_landed(commander):
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.set_mode(FlightMode.AUTO_LOITER, at(0.0, 0.0, 0.0, -2.0))
+    assert commander.update(at(60.0, 0.0, 0.0, -2.0)).mode is FlightMode.AUTO_LOITER   # no GCS ever: nothing
+    assert not commander.messages or "ground station" not in commander.messages[-1][1]
+    commander.gcs_heartbeat(60.0)
+    out = commander.update(at(71.0, 0.0, 0.0, -2.0))                   # NAV_DLL_ACT 0 (PX4's default)
+    assert out.mode is FlightMode.AUTO_LOITER and not commander.failsafe
+    assert commander.messages[-1][1] == "Connection to ground station lost"
+    commander.params.set("NAV_DLL_ACT", 6.0)                            # disarm, but only in the air
+    commander.gcs_heartbeat(72.0)
+    assert commander.update(at(83.0, 0.0, 0.0, 0.0, landed=True)).armed
+    commander.gcs_heartbeat(84.0)
+    assert not commander.update(at(95.0, 0.0, 0.0, -2.0)).armed
+
+
 def test_preflight_auto_disarm_without_takeoff(commander):
     commander.arm(status(t=0.0))
     assert commander.update(status(t=9.9)).armed

@@ -135,6 +135,18 @@ def test_offboard_loss_returns_home_when_configured(make_vehicle):
     assert math.hypot(x, y) < 0.15 and z > -0.05 and not server.sim.crashed
 
 
+def test_ground_station_link_loss_lands_when_configured(make_vehicle):
+    server, client = make_vehicle(params=(("NAV_DLL_ACT", 3.0), ("COM_DL_LOSS_T", 2.0)))
+    take_off(client)
+    with client.lock:   # a ground station says hello once, then goes quiet
+        client.conn.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+    text = client.statustext("Failsafe: data link lost", 5)
+    assert text is not None and "Land" in text
+    assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "LAND") is not None
+    assert wait_until(lambda: not server.sim.armed, 30), "vehicle did not land and disarm"
+    assert not server.sim.crashed
+
+
 def test_return_to_launch_command_flies_home_over_the_return_altitude(make_vehicle):
     server, client = make_vehicle(params=(("RTL_RETURN_ALT", 3.0), ("RTL_DESCEND_ALT", 2.0),
                                           ("RTL_LAND_DELAY", 0.5)))
