@@ -11,6 +11,7 @@ import pytest
 mavsdk = pytest.importorskip("mavsdk")
 from mavsdk.plugins.action import Action  # noqa: E402
 from mavsdk.plugins.offboard import Offboard, PositionNedYaw  # noqa: E402
+from mavsdk.plugins.param import Param  # noqa: E402
 from mavsdk.plugins.telemetry import FlightMode, Telemetry  # noqa: E402
 
 from sitl_vehicle.server import ServerConfig, VehicleServer  # noqa: E402
@@ -32,7 +33,7 @@ def wait_for(predicate, timeout: float, what: str):
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def test_mavsdk_connect_health_arm_takeoff_offboard_land():
+def test_mavsdk_connect_health_arm_takeoff_offboard_return_land():
     port = free_udp_port()
     config = ServerConfig(vehicle=dataclasses.replace(VehicleConfig(), noise=None),
                           gcs_local=("127.0.0.1", 0), gcs_remote=None, api_local=("127.0.0.1", 0),
@@ -66,6 +67,14 @@ def test_mavsdk_connect_health_arm_takeoff_offboard_land():
         assert _near(server.sim.truth.position, (1.0, -0.5, -1.5), 0.06)
 
         offboard.stop()  # MAVSDK switches to Hold
+        action.set_return_to_launch_altitude(2.0)                     # RTL_RETURN_ALT
+        assert abs(action.get_return_to_launch_altitude() - 2.0) < 1e-3
+        Param(system).set_param_float("RTL_DESCEND_ALT", 1.0)
+        Param(system).set_param_float("RTL_LAND_DELAY", -1.0)           # wait over home until told to land
+        action.return_to_launch()
+        wait_for(lambda: telemetry.flight_mode() == FlightMode.RETURN_TO_LAUNCH, 5, "return mode")
+        wait_for(lambda: _near(telemetry.position_velocity_ned().position, (0.0, 0.0, -1.0), 0.1), 30,
+                 "return home to RTL_DESCEND_ALT")
         action.land()
         wait_for(lambda: not telemetry.armed(), 40, "landing and auto-disarm")
         assert server.sim.truth.position[2] > -0.05 and not server.sim.crashed
