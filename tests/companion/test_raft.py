@@ -250,6 +250,14 @@ def test_input_scale_zooms_frames_and_returns_flow_in_frame_pixels(scale):
     np.testing.assert_allclose(backend.estimate(img1, img2, flow_init=init), init, atol=1e-4)
 
 
+def test_frames_too_small_after_zooming_name_the_input_scale():
+    backend = make_flow_backend("raft", random_init_seed=1, iters=1, input_scale=0.5)
+    img1, img2 = textured_pair(100, 100, (1.0, 0.5))
+    with pytest.raises(ValueError, match="50×50 at input scale 0.5") as info:
+        backend.estimate(img1, img2)
+    assert "\n" not in str(info.value)
+
+
 @pytest.mark.parametrize("scale", [0.0, -1.0, float("nan"), 8.0])
 def test_bad_input_scale_is_refused(scale):
     with pytest.raises(ValueError, match="input_scale"):

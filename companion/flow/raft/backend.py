@@ -155,7 +155,9 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, i
     padder = InputPadder((zh, zw), mode=padding_mode)
     if min(padder.padded_size) < MIN_SIDE:
         raise ValueError(f"RAFT needs frames of at least {MIN_SIDE}×{MIN_SIDE} pixels (its correlation pyramid "
-                         f"has 4 levels at 1/8 resolution); got {w}×{h}: use a larger camera or the dis backend")
+                         f"has 4 levels at 1/8 resolution); got {w}×{h}"
+                         + (f" ({zw}×{zh} at input scale {input_scale:g})" if (zh, zw) != (h, w) else "")
+                         + ": use a larger camera, a larger input scale or the dis backend")
     sx, sy = zw / w, zh / h
     if (zh, zw) != (h, w):
         img1, img2 = zoom_frame(img1, (zw, zh)), zoom_frame(img2, (zw, zh))
