@@ -202,7 +202,7 @@ def test_output_shape_and_padding(h, w):
 
 @pytest.mark.parametrize("h, w", [(48, 100), (100, 56), (20, 20)])
 def test_frames_too_small_for_the_pyramid_are_a_one_line_error(h, w):
-    backend = make_flow_backend("raft", random_init_seed=1, iters=1)
+    backend = make_flow_backend("raft", random_init_seed=1, iters=1, input_scale=1.0)
     img1, img2 = textured_pair(h, w, (1.0, 0.5))
     with pytest.raises(ValueError, match="at least 64×64") as info:
         backend.estimate(img1, img2)
@@ -358,7 +358,7 @@ def contraction_weights(backend, alpha: float = 0.5, target=(1.5, -0.75), eps: f
 
 def test_warm_start_converges_to_cold_result_with_enough_iterations():
     img1, img2 = textured_pair(64, 64, (1.0, 0.5))
-    backend = make_flow_backend("raft", random_init_seed=6)
+    backend = make_flow_backend("raft", random_init_seed=6, input_scale=1.0)   # the hand-set update works in pixels
     contraction_weights(backend)
     init = np.zeros((64, 64, 2), np.float32)
     init[..., 0], init[..., 1] = -3.0, 2.0

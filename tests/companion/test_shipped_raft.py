@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from companion.flow import make_flow_backend
-from companion.flow.raft.backend import DEFAULT_WEIGHTS
+from companion.flow.raft.backend import DEFAULT_INPUT_SCALE, DEFAULT_WEIGHTS
 from tests.companion.synthetic import textured_pair
 from tools import train_raft
 
@@ -43,4 +43,7 @@ def test_model_card_epe_is_reproduced(tmp_path):
     assert result["epe"] == pytest.approx(val["epe"], rel=2e-3)
     assert result["dis_medium_epe"] == pytest.approx(val["dis_medium_epe"], rel=2e-3)
     assert result["epe"] < 1.0          # trained: random RAFT-small weights score about 14 px on these pairs
-    assert f"{val['epe']:.3f}" in (DEFAULT_WEIGHTS.parent / "MODEL_CARD.md").read_text()
+    card = (DEFAULT_WEIGHTS.parent / "MODEL_CARD.md").read_text()
+    assert f"{val['epe']:.3f}" in card
+    # the card's number is for the scale the backend runs the weights at by default
+    assert val["input_scale"] == DEFAULT_INPUT_SCALE and f"input scale {DEFAULT_INPUT_SCALE:g}" in card

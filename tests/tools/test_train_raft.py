@@ -261,7 +261,7 @@ def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     assert math.isfinite(result["epe"]) and result["epe"] >= 0
     assert math.isfinite(result["dis_medium_epe"]) and result["dis_medium_epe"] >= 0
     assert f"{result['epe']:.3f}" in out
-    assert result["input_scale"] == 1.0
+    assert result["input_scale"] == train_raft.DEFAULT_INPUT_SCALE          # the raft backend's default
     rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
                           "--height", "64", "--val-size", "2", "--val-iters", "2", "--input-scale", "1.5",
                           "--out", str(tmp_path / "zoomed")])

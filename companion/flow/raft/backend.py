@@ -23,7 +23,7 @@ DEFAULT_WEIGHTS = WEIGHTS_DIR / "raft-small-flowgap.pth"
 MIN_SIDE = 64
 # The shipped weights' input scale (MODEL_CARD.md): frames are enlarged by this factor before RAFT runs, so
 # its 1/8-resolution grid is finer relative to the camera's pixels, and the flow is shrunk back.
-DEFAULT_INPUT_SCALE = 1.0
+DEFAULT_INPUT_SCALE = 1.25
 
 
 def zoom_frame(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
