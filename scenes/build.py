@@ -168,8 +168,8 @@ def build_scene(spec: SceneSpec) -> GaussianCloud:
     bg = spec.background
     bg_tex = textures.make_texture(spec.background_texture, bg.seed, bg.width, bg.height, TEXTURE_PX_PER_M,
                                    bg.texture_scale)
-    parts.append(_plane_yz(spec, spec.background_x, wall.center_y - bg.width / 2, wall.center_y + bg.width / 2,
-                           -bg.height, 0.0, d.background_spacing, bg_tex, None, LABEL_BACKGROUND))
+    parts.append(_plane_yz(spec, spec.background_x, *spec.background_rect, d.background_spacing, bg_tex, None,
+                           LABEL_BACKGROUND))
 
     # floor
     if spec.floor.enabled:

@@ -91,9 +91,8 @@ class SceneCollision:
         self.wall_back_x: float = float(spec.wall_back_x)
         self._y_lo, self._y_hi = w.center_y - w.width / 2, w.center_y + w.width / 2
         self._z_lo, self._z_hi = -w.height, 0.0
-        bg = spec.background
         self.background_x: float = float(spec.background_x)
-        self._bg = (w.center_y - bg.width / 2, w.center_y + bg.width / 2, -bg.height, 0.0)  # as scenes.build lays it
+        self._bg = spec.background_rect
         self._openings = [_Polygon(op.polygon()) for op in spec.openings]
         self._frames = [(poly, float(op.frame_width), self.wall_x - float(op.frame_depth))
                         for poly, op in zip(self._openings, spec.openings, strict=True) if op.frame_width > 0]

@@ -125,6 +125,12 @@ class SceneSpec:
         return self.wall_back_x + self.background.gap
 
     @property
+    def background_rect(self) -> tuple[float, float, float, float]:
+        """(y_lo, y_hi, z_lo, z_hi) of the background surface: centred on the wall, standing on the floor."""
+        half = self.background.width / 2
+        return self.wall.center_y - half, self.wall.center_y + half, -self.background.height, 0.0
+
+    @property
     def background_texture(self) -> str:
         return self.background.texture or self.wall.texture
 

@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from companion.flow.raft.backend import DEFAULT_INPUT_SCALE, estimate_flow
+from companion.flow.raft.backend import DEFAULT_INPUT_SCALE, INPUT_SCALE_RANGE, estimate_flow
 from tools.raft_data import (
     DEFAULT_CROP,
     DEFAULT_HEIGHT,
@@ -468,8 +468,9 @@ def _check(args: argparse.Namespace) -> None:
         if cw > args.width or ch > args.height:
             raise CliError(f"--crop {args.crop} is larger than the {args.width}x{args.height} frames "
                            f"(use a smaller --crop or --crop none)")
-    if not (math.isfinite(args.input_scale) and 0.25 <= args.input_scale <= 4.0):
-        raise CliError(f"--input-scale must be within 0.25..4 (got {args.input_scale})")
+    lo, hi = INPUT_SCALE_RANGE
+    if not (math.isfinite(args.input_scale) and lo <= args.input_scale <= hi):
+        raise CliError(f"--input-scale must be within {lo:g}..{hi:g} (got {args.input_scale})")
     if args.zoom is not None:
         lo, hi = args.zoom
         if not (1.0 <= lo <= hi and math.isfinite(hi)):

@@ -24,6 +24,7 @@ MIN_SIDE = 64
 # The shipped weights' input scale (MODEL_CARD.md): frames are enlarged by this factor before RAFT runs, so
 # its 1/8-resolution grid is finer relative to the camera's pixels, and the flow is shrunk back.
 DEFAULT_INPUT_SCALE = 1.25
+INPUT_SCALE_RANGE = (0.25, 4.0)  # accepted input_scale values (smaller frames, or 16× the compute)
 
 
 def zoom_frame(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -79,8 +80,9 @@ class RaftBackend:
             torch.set_num_threads(int(num_threads))
         if iters < 0:
             raise ValueError("iters must be >= 0")
-        if not (np.isfinite(input_scale) and 0.25 <= input_scale <= 4.0):
-            raise ValueError(f"input_scale must be within 0.25..4 (got {input_scale})")
+        lo, hi = INPUT_SCALE_RANGE
+        if not (np.isfinite(input_scale) and lo <= input_scale <= hi):
+            raise ValueError(f"input_scale must be within {lo:g}..{hi:g} (got {input_scale})")
         self.input_scale = float(input_scale)
         self.iters = int(iters)
         self.warm_start = bool(warm_start)
