@@ -51,7 +51,8 @@ from tools.raft_data import (
 
 PROG = "flowgap-train-raft"
 TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height", "crop",
-              "zoom", "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters")
+              "zoom", "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters", "upsample")
+UPSAMPLE_MODES = {"centres": False, "corners": True}   # --upsample -> RaftConfig.upsample_align_corners
 
 
 class CliError(Exception):
@@ -121,10 +122,10 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
 # Model, weights, checkpoints
 # ---------------------------------------------------------------------------------------------------------
 
-def build_model(variant: str):
+def build_model(variant: str, upsample: str = "centres"):
     from companion.flow.raft.model import RAFT, RaftConfig
 
-    return RAFT(RaftConfig.for_variant(variant))
+    return RAFT(RaftConfig.for_variant(variant, upsample_align_corners=UPSAMPLE_MODES[upsample]))
 
 
 def load_weights_into(model: torch.nn.Module, path: str | Path, variant: str) -> str:
@@ -133,26 +134,33 @@ def load_weights_into(model: torch.nn.Module, path: str | Path, variant: str) ->
     from companion.flow.raft.weights import load_raft_state_dict
 
     try:
-        layout, found, state = load_raft_state_dict(path)
+        loaded = load_raft_state_dict(path)
     except FlowWeightsError as exc:
         raise CliError(str(exc)) from None
-    if found != variant:
-        raise CliError(f"{path} holds RAFT-{found} weights, RAFT-{variant} was requested (use --variant {found})")
+    if loaded.variant != variant:
+        raise CliError(f"{path} holds RAFT-{loaded.variant} weights, RAFT-{variant} was requested "
+                       f"(use --variant {loaded.variant})")
     try:
-        model.load_state_dict(state, strict=True)
+        model.load_state_dict(loaded.state_dict, strict=True)
     except RuntimeError as exc:
         raise CliError(f"{path} does not fit RAFT-{variant}: {str(exc).splitlines()[0][:200]}") from None
-    return layout
+    return loaded.layout
 
 
-def weights_variant(path: str | Path) -> str:
+def read_weights(path: str | Path):
+    """:class:`RaftWeights` of ``path``; a bad file is a one-line :class:`CliError`."""
     from companion.flow.base import FlowWeightsError
     from companion.flow.raft.weights import load_raft_state_dict
 
     try:
-        return load_raft_state_dict(path)[1]
+        return load_raft_state_dict(path)
     except FlowWeightsError as exc:
         raise CliError(str(exc)) from None
+
+
+def upsample_mode(align_corners: bool) -> str:
+    """The ``--upsample`` name of an ``upsample_align_corners`` setting."""
+    return next(k for k, v in UPSAMPLE_MODES.items() if v == align_corners)
 
 
 def _rng_state() -> dict:
@@ -170,13 +178,12 @@ def _set_rng_state(state: dict) -> None:
 
 def save_checkpoint(path: Path, model, optimizer, scheduler, step: int, config: dict) -> Path:
     """A flowgap-raft weights file with the training state under ``"train"`` (see the module docstring)."""
-    from companion.flow.raft.weights import FORMAT_NAME, FORMAT_VERSION
+    from companion.flow.raft.weights import flowgap_weights_record
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    obj = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "variant": config["variant"],
-           "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
-           "train": {"optimizer": optimizer.state_dict(), "scheduler": scheduler.state_dict(), "step": step,
-                     "rng": _rng_state(), "config": dict(config)}}
+    obj = flowgap_weights_record(model, config["variant"])
+    obj["train"] = {"optimizer": optimizer.state_dict(), "scheduler": scheduler.state_dict(), "step": step,
+                    "rng": _rng_state(), "config": dict(config)}
     tmp = path.with_suffix(path.suffix + ".tmp")
     torch.save(obj, tmp)
     tmp.replace(path)
@@ -248,10 +255,12 @@ def train(args: argparse.Namespace) -> dict:
             config["crop"] = "none"        # checkpoints from before --crop existed trained on whole frames
         if "zoom" not in stored:
             config["zoom"] = None          # nor did they zoom
+        if "upsample" not in stored:
+            config["upsample"] = "corners"  # nor upsample from block centres
 
     out = Path(args.out)
     if args.init and not resume:
-        weights_variant(args.init)  # fail early with a one-line error
+        read_weights(args.init)  # fail early with a one-line error
     dataset = RenderedFlowDataset(seed=config["seed"], length=max(1, config["steps"] * config["batch"]),
                                   width=config["width"], height=config["height"],
                                   pairs_per_scene=config["pairs_per_scene"], exposure_jitter=config["jitter"],
@@ -260,7 +269,7 @@ def train(args: argparse.Namespace) -> dict:
     val = validation_set(config["val_size"], config["width"], config["height"]) if config["val_size"] else None
 
     torch.manual_seed(config["seed"])
-    model = build_model(config["variant"]).to(device)
+    model = build_model(config["variant"], config["upsample"]).to(device)
     if resume is not None:
         model.load_state_dict(resume["state_dict"], strict=True)
     elif args.init:
@@ -345,14 +354,16 @@ def train(args: argparse.Namespace) -> dict:
 
 def eval_only(args: argparse.Namespace) -> dict:
     device = _device(args.device)
-    variant = weights_variant(args.eval_only)
-    model = build_model(variant)
+    loaded = read_weights(args.eval_only)
+    variant, upsample = loaded.variant, upsample_mode(loaded.upsample_align_corners)
+    model = build_model(variant, upsample)      # as the weights were trained, whatever --upsample says
     layout = load_weights_into(model, args.eval_only, variant)
     model.to(device).eval()
     size = args.val_size or DEFAULT_VALIDATION_SIZE
     pairs = validation_set(size, args.width, args.height, seed=args.val_seed)
     result = evaluate(model, pairs, args.val_iters, device, with_dis=True, input_scale=args.input_scale)
-    result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, "seed": args.val_seed, **result}
+    result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, "upsample": upsample,
+              "seed": args.val_seed, **result}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
@@ -401,6 +412,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--clip", type=float, default=1.0, help="gradient-norm clipping")
     t.add_argument("--gamma", type=float, default=0.8, help="sequence-loss decay over iterations")
     t.add_argument("--iters", type=int, default=8, help="RAFT refinement iterations while training")
+    t.add_argument("--upsample", choices=tuple(UPSAMPLE_MODES), default="centres",
+                   help="RAFT-small's bilinear x8 upsampling: each 1/8-resolution value at its 8x8 block's "
+                        "centre, or stretched to the frame's corners as the RAFT authors (and flowgap's "
+                        "stage 1-3 weights); the run's choice wins over --init weights'")
     t.add_argument("--max-flow", dest="max_flow", type=float, default=400.0,
                    help="ignore ground-truth flow longer than this (px)")
     d = p.add_argument_group("data")

@@ -9,8 +9,8 @@ import torch
 from companion.flow import FlowWeightsError, make_flow_backend
 from companion.flow.raft import RAFT, InputPadder, RaftConfig
 from companion.flow.raft.corr import CorrBlock
-from companion.flow.raft.upsample import convex_upsample
-from companion.flow.raft.weights import clear_cache, save_flowgap_weights
+from companion.flow.raft.upsample import convex_upsample, upflow8
+from companion.flow.raft.weights import clear_cache, load_raft_state_dict, save_flowgap_weights
 from tests.companion.synthetic import textured_pair
 
 torch.set_num_threads(2)
@@ -304,6 +304,49 @@ def test_convex_upsampling_of_constant_flow_is_exact_inside():
     assert not torch.allclose(up[0, 0, :8], torch.full((8, 40), 10.0))
 
 
+@pytest.mark.parametrize("h, w", [(15, 20), (38, 50)])
+def test_bilinear_upsampling_from_block_centres_is_exact_for_linear_flow_at_any_size(h, w):
+    # A linear field sampled at the 8×8 blocks' centres (8i + 3.5) must come back exactly wherever the
+    # interpolation is not clamped at the border, whatever the frame size.
+    a, b, c = 0.12, -0.05, 2.0
+    ys, xs = np.mgrid[0:h, 0:w]
+    coarse = (a * (8 * xs + 3.5) + b * (8 * ys + 3.5) + c) / 8.0
+    flow = torch.from_numpy(np.stack([coarse, -coarse])).float().unsqueeze(0)
+    Y, X = np.mgrid[0:8 * h, 0:8 * w]
+    exact = a * X + b * Y + c
+    inside = (slice(4, 8 * h - 4), slice(4, 8 * w - 4))
+    centres = upflow8(flow, align_corners=False)[0].numpy()
+    assert np.allclose(centres[0][inside], exact[inside], atol=1e-4)
+    assert np.allclose(centres[1][inside], -exact[inside], atol=1e-4)
+    corners = upflow8(flow, align_corners=True)[0].numpy()
+    # The RAFT authors' convention stretches the grid to the corners: off by up to 3.5 px × the gradient.
+    assert np.abs(corners[0] - exact).max() > 0.3
+
+
+def test_weights_file_records_the_upsampling_convention(tmp_path):
+    centres = RAFT(RaftConfig.small(upsample_align_corners=False))
+    save_flowgap_weights(centres, tmp_path / "centres.pth", "small")
+    loaded = load_raft_state_dict(tmp_path / "centres.pth")
+    assert loaded.layout == "flowgap" and loaded.variant == "small"
+    assert loaded.upsample_align_corners is False and loaded.config().upsample_align_corners is False
+    # A version-1 file (before the convention was recorded) was trained with the RAFT authors' corners.
+    obj = torch.load(tmp_path / "centres.pth", weights_only=True)
+    v1 = {k: v for k, v in obj.items() if k != "upsample_align_corners"} | {"version": 1}
+    torch.save(v1, tmp_path / "v1.pth")
+    assert load_raft_state_dict(tmp_path / "v1.pth").upsample_align_corners is True
+    # The backend builds its model with the file's convention, so the two files give different flow.
+    img1, img2 = textured_pair(64, 72, (1.5, -1.0))
+    a = make_flow_backend("raft", weights=tmp_path / "centres.pth", iters=2)
+    b = make_flow_backend("raft", weights=tmp_path / "v1.pth", iters=2)
+    assert a.model.config.upsample_align_corners is False and b.model.config.upsample_align_corners is True
+    assert not np.array_equal(a.estimate(img1, img2), b.estimate(img1, img2))
+    torch.save(obj | {"upsample_align_corners": "yes"}, tmp_path / "bad.pth")
+    torch.save(obj | {"version": 3}, tmp_path / "v3.pth")
+    for name, needle in (("bad.pth", "upsample_align_corners"), ("v3.pth", "version 3")):
+        with pytest.raises(FlowWeightsError, match=needle):
+            make_flow_backend("raft", weights=tmp_path / name)
+
+
 def test_converter_writes_flowgap_layout(tmp_path, capsys):
     from companion.flow.raft.convert import main
 
@@ -313,6 +356,7 @@ def test_converter_writes_flowgap_layout(tmp_path, capsys):
     assert "torchvision layout, RAFT-small" in capsys.readouterr().out
     obj = torch.load(tmp_path / "out.pth", weights_only=True)
     assert obj["format"] == "flowgap-raft" and obj["variant"] == "small"
+    assert obj["upsample_align_corners"] is True      # as the RAFT authors trained it
     img1, img2 = textured_pair(64, 64, (1.0, 0.0))
     a = make_flow_backend("raft", weights=tmp_path / "tv.pth", iters=1).estimate(img1, img2)
     b = make_flow_backend("raft", weights=tmp_path / "out.pth", iters=1).estimate(img1, img2)

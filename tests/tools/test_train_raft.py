@@ -217,6 +217,24 @@ def test_run_writes_loadable_weights_and_checkpoints(trained_run):
     ckpt = torch.load(trained_run / "checkpoint-000004.pth", weights_only=True)
     assert ckpt["train"]["step"] == 4
     assert all(torch.equal(final[k], ckpt["state_dict"][k]) for k in final)
+    # new runs upsample from the 8×8 blocks' centres, and the files say so
+    assert ckpt["train"]["config"]["upsample"] == "centres" and ckpt["upsample_align_corners"] is False
+
+
+def test_checkpoints_from_before_the_upsampling_choice_resume_with_corners(trained_run, tmp_path):
+    old = torch.load(trained_run / "checkpoint-000002.pth", weights_only=True)
+    del old["upsample_align_corners"], old["train"]["config"]["upsample"]
+    old["version"] = 1
+    torch.save(old, tmp_path / "old.pth")
+    rc = train_raft.main(["--resume", str(tmp_path / "old.pth"), "--stop-at", "3", "--out", str(tmp_path / "run"),
+                          "--quiet"])
+    assert rc == 0
+    resumed = torch.load(tmp_path / "run" / "checkpoint-000003.pth", weights_only=True)
+    assert resumed["train"]["config"]["upsample"] == "corners" and resumed["upsample_align_corners"] is True
+    rc = train_raft.main(["--eval-only", str(tmp_path / "run" / "checkpoint-000003.pth"), "--width", "64",
+                          "--height", "64", "--val-size", "1", "--val-iters", "1", "--out", str(tmp_path / "ev")])
+    assert rc == 0
+    assert json.loads((tmp_path / "ev" / "eval.json").read_text())["upsample"] == "corners"
 
 
 def test_resume_continues_identically(trained_run, tmp_path):

@@ -99,21 +99,22 @@ class RaftBackend:
             self.weights_layout = "random"
         else:
             path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
-            layout, found, state = load_raft_state_dict(path)
+            loaded = load_raft_state_dict(path)
+            found = loaded.variant
             if variant is not None and variant != found:
                 raise FlowWeightsError(f"RAFT weights mismatch: {path} holds RAFT-{found}, RAFT-{variant} was "
                                        f"requested (expected {EXPECTED})")
             self.variant = found
-            self.model = RAFT(RaftConfig.for_variant(found))
+            self.model = RAFT(loaded.config())
             try:
-                self.model.load_state_dict(state, strict=True)
+                self.model.load_state_dict(loaded.state_dict, strict=True)
             except RuntimeError as exc:
                 first = str(exc).strip().splitlines()
                 detail = " ".join(s.strip() for s in first[1:3])[:200] if len(first) > 1 else first[0][:200]
                 raise FlowWeightsError(f"RAFT weights mismatch: {path} does not fit RAFT-{found} ({detail}; "
                                        f"expected {EXPECTED})") from None
             self.weights_path = path
-            self.weights_layout = layout
+            self.weights_layout = loaded.layout
         self.model.to(self._device).eval()
         self._previous_low: torch.Tensor | None = None
 

@@ -12,16 +12,17 @@ import sys
 from pathlib import Path
 
 from companion.flow.base import FlowWeightsError
-from companion.flow.raft.model import RAFT, RaftConfig
+from companion.flow.raft.model import RAFT
 from companion.flow.raft.weights import load_raft_state_dict, save_flowgap_weights
 
 
 def convert(src: Path, dst: Path) -> tuple[str, str]:
     """Write ``src``'s weights to ``dst`` in the flowgap layout; returns (source layout, variant)."""
-    layout, variant, state = load_raft_state_dict(src)
-    model = RAFT(RaftConfig.for_variant(variant))
+    loaded = load_raft_state_dict(src)
+    layout, variant = loaded.layout, loaded.variant
+    model = RAFT(loaded.config())
     try:
-        model.load_state_dict(state, strict=True)
+        model.load_state_dict(loaded.state_dict, strict=True)
     except RuntimeError as exc:
         detail = " ".join(str(exc).split())[:200]
         raise FlowWeightsError(f"RAFT weights mismatch: {src} does not fit RAFT-{variant} ({detail})") from None

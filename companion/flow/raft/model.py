@@ -24,6 +24,10 @@ class RaftConfig:
     corr_levels: int = 4
     corr_radius: int = 3
     dropout: float = 0.0
+    # RAFT-small's bilinear ×8 upsampling: True as the RAFT authors (coarse grid stretched to the corner
+    # pixels), False with each coarse value at its block's centre (see ``upflow8``).  RAFT's convex
+    # upsampling ignores it.
+    upsample_align_corners: bool = True
 
     @classmethod
     def small(cls, **kw) -> RaftConfig:
@@ -116,6 +120,7 @@ class RAFT(nn.Module):
         flow_up = predictions[-1] if predictions else self._upsample(flow_low, up_mask)
         return RaftOutput(flow_low, flow_up, predictions if all_predictions else [])
 
-    @staticmethod
-    def _upsample(flow: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
-        return upflow8(flow) if mask is None else convex_upsample(flow, mask)
+    def _upsample(self, flow: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+        if mask is None:
+            return upflow8(flow, align_corners=self.config.upsample_align_corners)
+        return convex_upsample(flow, mask)

@@ -6,10 +6,17 @@ import torch
 import torch.nn.functional as F
 
 
-def upflow8(flow: torch.Tensor) -> torch.Tensor:
-    """Bilinear ×8 (align_corners=True), as RAFT-small."""
+def upflow8(flow: torch.Tensor, align_corners: bool = True) -> torch.Tensor:
+    """Bilinear ×8.
+
+    ``align_corners=False`` puts each coarse value at the centre of its 8×8 block (pixel 8i + 3.5), where
+    its stride-8 features are centred.  ``True`` is the RAFT authors' RAFT-small: it stretches the coarse grid
+    to the frame's corner pixels, misplacing values by up to 3.5 px by an amount that depends on the frame
+    size, so weights trained on one size are slightly wrong on another (the official checkpoints and
+    flowgap's version-1 weights were trained that way).
+    """
     n, _, h, w = flow.shape
-    return 8.0 * F.interpolate(flow, size=(8 * h, 8 * w), mode="bilinear", align_corners=True)
+    return 8.0 * F.interpolate(flow, size=(8 * h, 8 * w), mode="bilinear", align_corners=align_corners)
 
 
 def convex_upsample(flow: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

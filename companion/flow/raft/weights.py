@@ -12,8 +12,10 @@ Layouts recognised by :func:`load_raft_state_dict`:
     ``context_encoder.``, ``update_block.motion_encoder.``, ``mask_predictor.``, ``Conv2dNormActivation``
     sub-indices ``.0`` conv / ``.1`` norm).  Mapped key by key by :func:`torchvision_to_ours`.
 ``flowgap``
-    ``{"format": "flowgap-raft", "version": 1, "variant": "small"|"large", "state_dict": {...ours...}}``,
-    written by :func:`save_flowgap_weights` (the RAFT training tool's output).
+    ``{"format": "flowgap-raft", "version": 2, "variant": "small"|"large", "upsample_align_corners": bool,
+    "state_dict": {...ours...}}``, written by :func:`save_flowgap_weights` (the RAFT training tool's
+    output).  Version 1 files have no ``upsample_align_corners``: they were trained with the RAFT authors'
+    ``True``, as were the official and torchvision checkpoints.
 
 Nothing is ever downloaded: a missing or mismatched file raises :class:`FlowWeightsError` with a one-line
 message naming the path and the expected format.
@@ -26,6 +28,7 @@ import re
 import threading
 from collections.abc import Mapping
 from pathlib import Path
+from typing import NamedTuple
 
 import torch
 
@@ -34,11 +37,29 @@ from companion.flow.base import FlowWeightsError
 log = logging.getLogger(__name__)
 
 FORMAT_NAME = "flowgap-raft"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+READABLE_VERSIONS = (1, 2)
 EXPECTED = ("an official RAFT checkpoint (raft-things.pth / raft-small.pth, 'module.' keys), a torchvision "
             "raft_large/raft_small state dict, or a flowgap-raft file")
 
-_CACHE: dict[tuple, tuple[str, dict[str, torch.Tensor]]] = {}
+
+
+class RaftWeights(NamedTuple):
+    """A loaded weights file: its layout, RAFT variant, our-layout state dict and upsampling convention."""
+
+    layout: str
+    variant: str
+    state_dict: dict[str, torch.Tensor]
+    upsample_align_corners: bool = True
+
+    def config(self):
+        """The :class:`RaftConfig` these weights were trained with."""
+        from companion.flow.raft.model import RaftConfig
+
+        return RaftConfig.for_variant(self.variant, upsample_align_corners=self.upsample_align_corners)
+
+
+_CACHE: dict[tuple, RaftWeights] = {}
 _LOCK = threading.Lock()
 
 
@@ -129,18 +150,24 @@ def torchvision_to_ours(state_dict: Mapping[str, torch.Tensor]) -> dict[str, tor
     return out
 
 
-def to_ours(obj: object) -> tuple[str, dict[str, torch.Tensor]]:
-    """(layout, our-layout state dict) for a loaded checkpoint object; raises ValueError if unrecognised."""
+def to_ours(obj: object) -> tuple[str, dict[str, torch.Tensor], bool]:
+    """(layout, our-layout state dict, upsample_align_corners) for a loaded checkpoint object.
+
+    Raises ValueError if the layout is unrecognised.
+    """
     layout = detect_layout(obj)
     if layout == "flowgap":
-        sd = obj["state_dict"]
-        if obj.get("version") != FORMAT_VERSION:
-            raise ValueError(f"flowgap-raft version {obj.get('version')!r}, expected {FORMAT_VERSION}")
-        return layout, dict(sd)
+        version = obj.get("version")
+        if version not in READABLE_VERSIONS:
+            raise ValueError(f"flowgap-raft version {version!r}, expected one of {READABLE_VERSIONS}")
+        align = obj.get("upsample_align_corners", True)
+        if not isinstance(align, bool):
+            raise ValueError(f"upsample_align_corners is {align!r}, expected true or false")
+        return layout, dict(obj["state_dict"]), align
     if layout == "official":
-        return layout, official_to_ours(obj)
+        return layout, official_to_ours(obj), True
     if layout == "torchvision":
-        return layout, torchvision_to_ours(obj)
+        return layout, torchvision_to_ours(obj), True
     raise ValueError("unrecognised checkpoint layout")
 
 
@@ -148,8 +175,11 @@ def to_ours(obj: object) -> tuple[str, dict[str, torch.Tensor]]:
 # Files
 # ---------------------------------------------------------------------------------------------------------
 
-def load_raft_state_dict(path: str | Path) -> tuple[str, str, dict[str, torch.Tensor]]:
-    """(layout, variant, our-layout CPU state dict) from ``path``, cached per process by path+mtime+size."""
+def load_raft_state_dict(path: str | Path) -> RaftWeights:
+    """:class:`RaftWeights` (layout, variant, our-layout CPU state dict, upsampling) from ``path``.
+
+    Cached per process by path + mtime + size.
+    """
     path = Path(path).expanduser()
     if not path.is_file():
         raise FlowWeightsError(f"RAFT weights not found: {path} (expected {EXPECTED}; nothing is downloaded)")
@@ -157,23 +187,22 @@ def load_raft_state_dict(path: str | Path) -> tuple[str, str, dict[str, torch.Te
     key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
     with _LOCK:
         if key in _CACHE:
-            layout, sd = _CACHE[key]
-            return layout, detect_variant(sd) or "?", sd
+            return _CACHE[key]
         try:
             obj = torch.load(path, map_location="cpu", weights_only=True)
         except Exception as exc:  # noqa: BLE001 - any unreadable file gets the same one-line error
             raise FlowWeightsError(f"RAFT weights unreadable: {path} ({type(exc).__name__}; expected {EXPECTED})"
                                    ) from exc
         try:
-            layout, sd = to_ours(obj)
+            layout, sd, align = to_ours(obj)
         except ValueError as exc:
             raise FlowWeightsError(f"RAFT weights not recognised: {path} ({exc}; expected {EXPECTED})") from exc
         variant = detect_variant(sd)
         if variant is None:
             raise FlowWeightsError(f"RAFT weights not recognised: {path} (no update-block GRU; expected {EXPECTED})")
-        _CACHE[key] = (layout, sd)
+        loaded = _CACHE[key] = RaftWeights(layout, variant, sd, align)
         log.info("loaded RAFT-%s weights (%s layout) from %s", variant, layout, path)
-        return layout, variant, sd
+        return loaded
 
 
 def clear_cache() -> None:
@@ -181,10 +210,16 @@ def clear_cache() -> None:
         _CACHE.clear()
 
 
+def flowgap_weights_record(model: torch.nn.Module, variant: str) -> dict:
+    """``model``'s weights as a flowgap-layout object (what :func:`save_flowgap_weights` writes)."""
+    return {"format": FORMAT_NAME, "version": FORMAT_VERSION, "variant": variant,
+            "upsample_align_corners": bool(model.config.upsample_align_corners),
+            "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()}}
+
+
 def save_flowgap_weights(model: torch.nn.Module, path: str | Path, variant: str) -> Path:
     """Write ``model``'s weights in the flowgap layout."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
-    torch.save({"format": FORMAT_NAME, "version": FORMAT_VERSION, "variant": variant, "state_dict": state}, path)
+    torch.save(flowgap_weights_record(model, variant), path)
     return path
