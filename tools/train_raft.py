@@ -37,7 +37,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from companion.flow.raft.backend import DEFAULT_INPUT_SCALE, INPUT_SCALE_RANGE, estimate_flow
+from companion.flow.raft.backend import (
+    DEFAULT_INPUT_SCALE,
+    DEFAULT_MIRROR_AVERAGE,
+    INPUT_SCALE_RANGE,
+    estimate_flow,
+)
 from tools.raft_data import (
     DEFAULT_CROP,
     DEFAULT_HEIGHT,
@@ -87,10 +92,10 @@ def _epe_sum(flow: np.ndarray, gt: np.ndarray, valid: np.ndarray) -> tuple[float
 
 @torch.no_grad()
 def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, device: torch.device,
-             with_dis: bool = False, input_scale: float = 1.0) -> dict:
+             with_dis: bool = False, input_scale: float = 1.0, mirror_average: bool = False) -> dict:
     """Validation EPE (mean over all valid pixels of all pairs) of ``model``, optionally of DIS medium.
 
-    ``input_scale`` enlarges the frames before RAFT as the ``raft`` backend does (``estimate_flow``).
+    ``input_scale`` and ``mirror_average`` are the ``raft`` backend's inference options (``estimate_flow``).
     """
     was_training = model.training
     model.eval()
@@ -103,7 +108,8 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
         dis = make_flow_backend("dis", preset="medium")
     for i in range(len(dataset)):
         img1, img2, gt, valid = dataset.pair(i)
-        flow, _ = estimate_flow(model, img1, img2, iters=iters, input_scale=input_scale, device=device)
+        flow, _ = estimate_flow(model, img1, img2, iters=iters, input_scale=input_scale, device=device,
+                                mirror_average=mirror_average)
         s, c = _epe_sum(flow, gt, valid)
         raft_sum += s
         count += c
@@ -112,7 +118,8 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
             dis_sum += _epe_sum(dflow, gt, valid)[0]
     model.train(was_training)
     result = {"pairs": len(dataset), "valid_pixels": count, "width": dataset.width, "height": dataset.height,
-              "iters": iters, "input_scale": input_scale, "epe": raft_sum / count if count else float("nan")}
+              "iters": iters, "input_scale": input_scale, "mirror_average": mirror_average,
+              "epe": raft_sum / count if count else float("nan")}
     if dis is not None:
         result["dis_medium_epe"] = dis_sum / count if count else float("nan")
     return result
@@ -322,7 +329,8 @@ def train(args: argparse.Namespace) -> dict:
         record = {"step": step, "loss": loss_value, "epe": epe, "lr": scheduler.get_last_lr()[0]}
         _log(log_path, record)
         if val is not None and args.val_every and step % args.val_every == 0 and step < stop:
-            last_val = evaluate(model, val, config["val_iters"], device, input_scale=args.input_scale)["epe"]
+            last_val = evaluate(model, val, config["val_iters"], device, input_scale=args.input_scale,
+                                mirror_average=args.mirror_average)["epe"]
             _log(log_path, {"step": step, "val_epe": last_val})
         if args.save_every and step % args.save_every == 0 and step < stop:
             save_checkpoint(out / f"checkpoint-{step:06d}.pth", model, optimizer, scheduler, step, config)
@@ -340,7 +348,8 @@ def train(args: argparse.Namespace) -> dict:
     summary = {"weights": str(final), "step": step, "steps_run": steps_run,
                "seconds_per_step": elapsed / steps_run if steps_run else None}
     if val is not None:
-        result = evaluate(model, val, config["val_iters"], device, with_dis=True, input_scale=args.input_scale)
+        result = evaluate(model, val, config["val_iters"], device, with_dis=True, input_scale=args.input_scale,
+                          mirror_average=args.mirror_average)
         _log(log_path, {"step": step, "val_epe": result["epe"], "dis_medium_epe": result["dis_medium_epe"]})
         summary["validation"] = result
         (out / "eval.json").write_text(json.dumps({"weights": str(final), **result}, indent=2) + "\n")
@@ -361,7 +370,8 @@ def eval_only(args: argparse.Namespace) -> dict:
     model.to(device).eval()
     size = args.val_size or DEFAULT_VALIDATION_SIZE
     pairs = validation_set(size, args.width, args.height, seed=args.val_seed)
-    result = evaluate(model, pairs, args.val_iters, device, with_dis=True, input_scale=args.input_scale)
+    result = evaluate(model, pairs, args.val_iters, device, with_dis=True, input_scale=args.input_scale,
+                      mirror_average=args.mirror_average)
     result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, "upsample": upsample,
               "seed": args.val_seed, **result}
     out = Path(args.out)
@@ -370,7 +380,7 @@ def eval_only(args: argparse.Namespace) -> dict:
     which = "validation" if args.val_seed == VALIDATION_SEED else f"seed-{args.val_seed}"
     print(f"EPE raft-{variant} {result['epe']:.3f} px, dis:medium {result['dis_medium_epe']:.3f} px "
           f"({result['pairs']} {which} pairs, {args.width}x{args.height}, {args.val_iters} iters, "
-          f"input scale {args.input_scale:g}) "
+          f"input scale {args.input_scale:g}{', mirror-averaged' if args.mirror_average else ''}) "
           f"-> {out / 'eval.json'}")
     return result
 
@@ -443,6 +453,10 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--input-scale", dest="input_scale", type=float, default=DEFAULT_INPUT_SCALE,
                    help="enlarge validation frames by this factor before RAFT, as the raft backend's "
                         "input_scale does")
+    v.add_argument("--mirror-average", dest="mirror_average", action=argparse.BooleanOptionalAction,
+                   default=DEFAULT_MIRROR_AVERAGE,
+                   help="also run each validation pair mirrored left-right and average the flows, as the raft "
+                        "backend's mirror_average does")
     v.add_argument("--val-every", dest="val_every", type=int, default=200,
                    help="validate every N steps (0: only at the end)")
     o = p.add_argument_group("output and runtime")

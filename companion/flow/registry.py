@@ -54,7 +54,8 @@ def parse_backend(spec: str) -> tuple[str, dict]:
     """A backend spec -> (name, options).
 
     'dis:fast' -> ('dis', {'preset': 'fast'}); 'raft' -> ('raft', {}); 'raft:large' -> a variant;
-    'raft:scale=1.5', 'raft:small,iters=20' -> RAFT options (``scale`` is the backend's ``input_scale``).
+    'raft:scale=1.5', 'raft:small,iters=20,mirror=1' -> RAFT options (``scale`` is the backend's
+    ``input_scale``, ``mirror`` its ``mirror_average``, 0 or 1).
     """
     name, _, arg = spec.partition(":")
     if not arg:
@@ -63,10 +64,17 @@ def parse_backend(spec: str) -> tuple[str, dict]:
         return name, {"preset": arg}
     if name == "raft":
         return name, _raft_options(spec, arg)
-    raise ValueError(f"backend {spec!r}: only dis:<preset> and raft:<variant>,scale=<s>,iters=<n> take an argument")
+    raise ValueError(f"backend {spec!r}: only dis:<preset> and raft:<variant>,scale=<s>,iters=<n>,mirror=<0|1> "
+                     "take an argument")
 
 
-_RAFT_KEYS = {"scale": ("input_scale", float), "iters": ("iters", int)}
+def _zero_or_one(text: str) -> bool:
+    if text not in ("0", "1"):
+        raise ValueError(text)
+    return text == "1"
+
+
+_RAFT_KEYS = {"scale": ("input_scale", float), "iters": ("iters", int), "mirror": ("mirror_average", _zero_or_one)}
 
 
 def _raft_options(spec: str, arg: str) -> dict:
@@ -77,10 +85,12 @@ def _raft_options(spec: str, arg: str) -> dict:
             options["variant"] = key
             continue
         if key not in _RAFT_KEYS:
-            raise ValueError(f"backend {spec!r}: unknown RAFT option {key!r} (use scale=<s> or iters=<n>)")
+            raise ValueError(f"backend {spec!r}: unknown RAFT option {key!r} (use scale=<s>, iters=<n> or "
+                             "mirror=<0|1>)")
         option, kind = _RAFT_KEYS[key]
         try:
             options[option] = kind(value)
         except ValueError:
-            raise ValueError(f"backend {spec!r}: {key} must be a number (got {value!r})") from None
+            what = "0 or 1" if key == "mirror" else "a number"
+            raise ValueError(f"backend {spec!r}: {key} must be {what} (got {value!r})") from None
     return options

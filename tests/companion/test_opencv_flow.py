@@ -53,6 +53,8 @@ def test_registry_rejects_unknown_and_bad_inputs():
     ("raft:large", ("raft", {"variant": "large"})),
     ("raft:scale=1.5", ("raft", {"input_scale": 1.5})),
     ("raft:small,iters=20,scale=2", ("raft", {"variant": "small", "iters": 20, "input_scale": 2.0})),
+    ("raft:mirror=1", ("raft", {"mirror_average": True})),
+    ("raft:scale=1.5,mirror=0", ("raft", {"input_scale": 1.5, "mirror_average": False})),
 ])
 def test_backend_specs_parse_to_options(spec, expected):
     from companion.flow.registry import parse_backend
@@ -63,6 +65,7 @@ def test_backend_specs_parse_to_options(spec, expected):
 @pytest.mark.parametrize("spec, needle", [
     ("raft:zoom=2", "unknown RAFT option 'zoom'"),
     ("raft:scale=big", "scale must be a number"),
+    ("raft:mirror=yes", "mirror must be 0 or 1"),
     ("farneback:x", "only dis:<preset>"),
 ])
 def test_bad_backend_specs_are_one_line_errors(spec, needle):

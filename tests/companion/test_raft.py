@@ -250,6 +250,23 @@ def test_input_scale_zooms_frames_and_returns_flow_in_frame_pixels(scale):
     np.testing.assert_allclose(backend.estimate(img1, img2, flow_init=init), init, atol=1e-4)
 
 
+def test_mirror_average_is_the_mean_of_the_pair_and_its_mirror_image():
+    img1, img2 = textured_pair(72, 88, (2.0, 1.0))
+    plain = make_flow_backend("raft", random_init_seed=4, iters=2)
+    averaged = make_flow_backend("raft", random_init_seed=4, iters=2, mirror_average=True)
+    a = plain.estimate(img1, img2)
+    m = plain.estimate(img1[:, ::-1].copy(), img2[:, ::-1].copy())[:, ::-1] * np.float32([-1, 1])
+    assert not np.allclose(a, m, atol=1e-3)            # random weights: the two estimates differ
+    np.testing.assert_allclose(averaged.estimate(img1, img2), 0.5 * (a + m), atol=2e-4)
+    # with the flow head silenced the result is the initial flow, mirrored there and back
+    with torch.no_grad():
+        averaged.model.update_block.flow_head.conv2.weight.zero_()
+        averaged.model.update_block.flow_head.conv2.bias.zero_()
+    init = np.zeros((72, 88, 2), np.float32)
+    init[..., 0], init[..., 1] = 1.5, -0.5
+    np.testing.assert_allclose(averaged.estimate(img1, img2, flow_init=init), init, atol=1e-4)
+
+
 def test_frames_too_small_after_zooming_name_the_input_scale():
     backend = make_flow_backend("raft", random_init_seed=1, iters=1, input_scale=0.5)
     img1, img2 = textured_pair(100, 100, (1.0, 0.5))

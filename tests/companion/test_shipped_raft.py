@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from companion.flow import make_flow_backend
-from companion.flow.raft.backend import DEFAULT_INPUT_SCALE, DEFAULT_WEIGHTS
+from companion.flow.raft.backend import DEFAULT_INPUT_SCALE, DEFAULT_MIRROR_AVERAGE, DEFAULT_WEIGHTS
 from tests.companion.synthetic import textured_pair
 from tools import train_raft
 
@@ -36,7 +36,8 @@ def test_model_card_epe_is_reproduced(tmp_path):
     val = json.loads(CARD_RESULTS.read_text())      # as `--eval-only` wrote it when the weights were made
     argv = ["--eval-only", str(DEFAULT_WEIGHTS), "--out", str(tmp_path), "--threads", "2",
             "--val-size", str(val["pairs"]), "--width", str(val["width"]), "--height", str(val["height"]),
-            "--val-iters", str(val["iters"]), "--input-scale", str(val.get("input_scale", 1.0))]
+            "--val-iters", str(val["iters"]), "--input-scale", str(val.get("input_scale", 1.0)),
+            "--mirror-average" if val.get("mirror_average") else "--no-mirror-average"]
     assert train_raft.main(argv) == 0
     result = json.loads((tmp_path / "eval.json").read_text())
     assert result["pairs"] == val["pairs"] and result["valid_pixels"] == val["valid_pixels"]
@@ -45,5 +46,6 @@ def test_model_card_epe_is_reproduced(tmp_path):
     assert result["epe"] < 1.0          # trained: random RAFT-small weights score about 14 px on these pairs
     card = (DEFAULT_WEIGHTS.parent / "MODEL_CARD.md").read_text()
     assert f"{val['epe']:.3f}" in card
-    # the card's number is for the scale the backend runs the weights at by default
+    # the card's number is for the settings the backend runs the weights with by default
     assert val["input_scale"] == DEFAULT_INPUT_SCALE and f"input scale {DEFAULT_INPUT_SCALE:g}" in card
+    assert val.get("mirror_average", False) == DEFAULT_MIRROR_AVERAGE

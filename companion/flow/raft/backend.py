@@ -24,6 +24,8 @@ MIN_SIDE = 64
 # The shipped weights' input scale (MODEL_CARD.md): frames are enlarged by this factor before RAFT runs, so
 # its 1/8-resolution grid is finer relative to the camera's pixels, and the flow is shrunk back.
 DEFAULT_INPUT_SCALE = 1.25
+# Whether the backend also runs the mirrored pair and averages (MODEL_CARD.md says why it is the default or not).
+DEFAULT_MIRROR_AVERAGE = False
 INPUT_SCALE_RANGE = (0.25, 4.0)  # accepted input_scale values (smaller frames, or 16× the compute)
 
 
@@ -38,6 +40,12 @@ def zoom_frame(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 def scaled_size(h: int, w: int, scale: float) -> tuple[int, int]:
     """(height, width) of an ``h``×``w`` frame enlarged by ``scale``."""
     return max(1, round(h * scale)), max(1, round(w * scale))
+
+
+def mirror_flow(flow: torch.Tensor) -> torch.Tensor:
+    """Left-right mirror of an N×2×H×W flow field: columns reversed and the x component negated."""
+    m = torch.flip(flow, dims=[-1])
+    return torch.cat([-m[:, :1], m[:, 1:]], dim=1)
 
 
 def forward_interpolate(flow_low: torch.Tensor) -> torch.Tensor:
@@ -67,7 +75,9 @@ class RaftBackend:
     ``num_threads`` (torch intra-op threads on CPU; None leaves the setting alone), ``random_init_seed``
     (build seeded random weights instead of loading a file: for timing and tests only), ``input_scale``
     (enlarge both frames by this factor before RAFT and shrink the flow back: finer flow for about
-    ``input_scale**2`` times the compute; the default is the shipped weights' own, :data:`DEFAULT_INPUT_SCALE`).
+    ``input_scale**2`` times the compute; the default is the shipped weights' own, :data:`DEFAULT_INPUT_SCALE`),
+    ``mirror_average`` (also run the left-right mirrored pair, in the same batch, and average the two
+    flows: their errors are partly independent; about twice the compute).
     """
 
     name = "raft"
@@ -75,7 +85,8 @@ class RaftBackend:
     def __init__(self, variant: str | None = None, weights: str | Path | None = None, iters: int = 12,
                  warm_start: bool = False, device: str = "cpu", num_threads: int | None = None,
                  random_init_seed: int | None = None, padding_mode: str = "sintel",
-                 input_scale: float = DEFAULT_INPUT_SCALE) -> None:
+                 input_scale: float = DEFAULT_INPUT_SCALE,
+                 mirror_average: bool = DEFAULT_MIRROR_AVERAGE) -> None:
         if num_threads is not None:
             torch.set_num_threads(int(num_threads))
         if iters < 0:
@@ -84,6 +95,7 @@ class RaftBackend:
         if not (np.isfinite(input_scale) and lo <= input_scale <= hi):
             raise ValueError(f"input_scale must be within {lo:g}..{hi:g} (got {input_scale})")
         self.input_scale = float(input_scale)
+        self.mirror_average = bool(mirror_average)
         self.iters = int(iters)
         self.warm_start = bool(warm_start)
         self.padding_mode = padding_mode
@@ -135,7 +147,8 @@ class RaftBackend:
         previous = self._previous_low if self.warm_start else None
         flow, low = estimate_flow(self.model, img1, img2, iters=self.iters if iters is None else int(iters),
                                   input_scale=self.input_scale, flow_init=init, previous_low=previous,
-                                  padding_mode=self.padding_mode, device=self._device)
+                                  padding_mode=self.padding_mode, device=self._device,
+                                  mirror_average=self.mirror_average)
         if self.warm_start:
             self._previous_low = low
         return flow
@@ -143,13 +156,16 @@ class RaftBackend:
 
 def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float = 1.0,
                   flow_init: np.ndarray | None = None, previous_low: torch.Tensor | None = None,
-                  padding_mode: str = "sintel", device: torch.device | str = "cpu") -> tuple[np.ndarray, torch.Tensor]:
+                  padding_mode: str = "sintel", device: torch.device | str = "cpu",
+                  mirror_average: bool = False) -> tuple[np.ndarray, torch.Tensor]:
     """(H×W×2 float32 flow, 1/8-resolution flow) of ``model`` for one pair of H×W×3 frames.
 
     The frames are enlarged by ``input_scale`` (when not 1) and padded to multiples of 8; the flow is
     unpadded, shrunk back and rescaled to the frames' pixels.  ``flow_init`` is a full-resolution initial
     flow; ``previous_low`` a previous 1/8-resolution result to warm-start from (carried forward), used
-    only when its grid matches.  Shared by :class:`RaftBackend` and ``flowgap-train-raft``'s validation.
+    only when its grid matches.  ``mirror_average`` runs the padded pair and its left-right mirror image as
+    one batch and averages the two flows (the mirrored one mirrored back).  Shared by :class:`RaftBackend`
+    and ``flowgap-train-raft``'s validation.
     """
     import cv2
 
@@ -178,8 +194,15 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, i
         init = F.avg_pool2d(fi, 8) / 8.0                   # full-res pixels -> 1/8-res cells
     elif previous_low is not None and previous_low.shape[-2:] == (ph // 8, pw // 8):
         init = forward_interpolate(previous_low)
+    if mirror_average:
+        t1, t2 = torch.cat([t1, torch.flip(t1, dims=[-1])]), torch.cat([t2, torch.flip(t2, dims=[-1])])
+        init = None if init is None else torch.cat([init, mirror_flow(init)])
     out = model(t1, t2, iters=iters, flow_init=init)
-    flow = np.ascontiguousarray(padder.unpad(out.flow_up)[0].permute(1, 2, 0).float().cpu().numpy(), dtype=np.float32)
+    flow_up, flow_low = out.flow_up, out.flow_low
+    if mirror_average:
+        flow_up = 0.5 * (flow_up[:1] + mirror_flow(flow_up[1:]))
+        flow_low = 0.5 * (flow_low[:1] + mirror_flow(flow_low[1:]))
+    flow = np.ascontiguousarray(padder.unpad(flow_up)[0].permute(1, 2, 0).float().cpu().numpy(), dtype=np.float32)
     if (zh, zw) != (h, w):
         flow = cv2.resize(flow, (w, h), interpolation=cv2.INTER_AREA) / np.float32([sx, sy])
-    return np.ascontiguousarray(flow, dtype=np.float32), out.flow_low
+    return np.ascontiguousarray(flow, dtype=np.float32), flow_low
