@@ -233,6 +233,16 @@ def test_warm_start_changes_result_and_zero_update_returns_init():
         np.testing.assert_allclose(out, init, atol=1e-5)
 
 
+def assert_silenced_flow_head_returns_init(backend, img1, img2, uv: tuple[float, float]) -> None:
+    """With its flow head zeroed RAFT only carries its initial flow through: a uniform ``uv`` must come back."""
+    with torch.no_grad():
+        backend.model.update_block.flow_head.conv2.weight.zero_()
+        backend.model.update_block.flow_head.conv2.bias.zero_()
+    init = np.zeros((*img1.shape[:2], 2), np.float32)
+    init[..., 0], init[..., 1] = uv
+    np.testing.assert_allclose(backend.estimate(img1, img2, flow_init=init), init, atol=1e-4)
+
+
 @pytest.mark.parametrize("scale", [1.5, 2.0, 0.75])
 def test_input_scale_zooms_frames_and_returns_flow_in_frame_pixels(scale):
     img1, img2 = textured_pair(90, 100, (2.0, 1.0))
@@ -240,14 +250,9 @@ def test_input_scale_zooms_frames_and_returns_flow_in_frame_pixels(scale):
     flow = backend.estimate(img1, img2)
     assert flow.shape == (90, 100, 2) and flow.dtype == np.float32 and np.isfinite(flow).all()
     assert not np.allclose(flow, make_flow_backend("raft", random_init_seed=2, iters=2).estimate(img1, img2))
-    # With the flow head silenced RAFT returns its initial flow: a uniform (2, -1) px init goes out to the
-    # zoomed frames as (2, -1) * scale and must come back as (2, -1) frame pixels.
-    with torch.no_grad():
-        backend.model.update_block.flow_head.conv2.weight.zero_()
-        backend.model.update_block.flow_head.conv2.bias.zero_()
-    init = np.zeros((90, 100, 2), np.float32)
-    init[..., 0], init[..., 1] = 2.0, -1.0
-    np.testing.assert_allclose(backend.estimate(img1, img2, flow_init=init), init, atol=1e-4)
+    # A uniform (2, -1) px init goes out to the zoomed frames as (2, -1) * scale and must come back as
+    # (2, -1) frame pixels.
+    assert_silenced_flow_head_returns_init(backend, img1, img2, (2.0, -1.0))
 
 
 def test_mirror_average_is_the_mean_of_the_pair_and_its_mirror_image():
@@ -258,13 +263,8 @@ def test_mirror_average_is_the_mean_of_the_pair_and_its_mirror_image():
     m = plain.estimate(img1[:, ::-1].copy(), img2[:, ::-1].copy())[:, ::-1] * np.float32([-1, 1])
     assert not np.allclose(a, m, atol=1e-3)            # random weights: the two estimates differ
     np.testing.assert_allclose(averaged.estimate(img1, img2), 0.5 * (a + m), atol=2e-4)
-    # with the flow head silenced the result is the initial flow, mirrored there and back
-    with torch.no_grad():
-        averaged.model.update_block.flow_head.conv2.weight.zero_()
-        averaged.model.update_block.flow_head.conv2.bias.zero_()
-    init = np.zeros((72, 88, 2), np.float32)
-    init[..., 0], init[..., 1] = 1.5, -0.5
-    np.testing.assert_allclose(averaged.estimate(img1, img2, flow_init=init), init, atol=1e-4)
+    # the initial flow is mirrored there and back
+    assert_silenced_flow_head_returns_init(averaged, img1, img2, (1.5, -0.5))
 
 
 def test_frames_too_small_after_zooming_name_the_input_scale():
