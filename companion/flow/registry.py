@@ -74,7 +74,9 @@ def _zero_or_one(text: str) -> bool:
     return text == "1"
 
 
-_RAFT_KEYS = {"scale": ("input_scale", float), "iters": ("iters", int), "mirror": ("mirror_average", _zero_or_one)}
+# spec key -> (backend option, parser, what the value must be)
+_RAFT_KEYS = {"scale": ("input_scale", float, "a number"), "iters": ("iters", int, "a number"),
+              "mirror": ("mirror_average", _zero_or_one, "0 or 1")}
 
 
 def _raft_options(spec: str, arg: str) -> dict:
@@ -87,10 +89,9 @@ def _raft_options(spec: str, arg: str) -> dict:
         if key not in _RAFT_KEYS:
             raise ValueError(f"backend {spec!r}: unknown RAFT option {key!r} (use scale=<s>, iters=<n> or "
                              "mirror=<0|1>)")
-        option, kind = _RAFT_KEYS[key]
+        option, kind, what = _RAFT_KEYS[key]
         try:
             options[option] = kind(value)
         except ValueError:
-            what = "0 or 1" if key == "mirror" else "a number"
             raise ValueError(f"backend {spec!r}: {key} must be {what} (got {value!r})") from None
     return options

@@ -43,7 +43,6 @@ EXPECTED = ("an official RAFT checkpoint (raft-things.pth / raft-small.pth, 'mod
             "raft_large/raft_small state dict, or a flowgap-raft file")
 
 
-
 class RaftWeights(NamedTuple):
     """A loaded weights file: its layout, RAFT variant, our-layout state dict and upsampling convention."""
 
