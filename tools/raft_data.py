@@ -6,7 +6,8 @@ dataset's settings (resolution, pairs per scene, jitter): the scene comes from
 families plus weak "plaster" and repetitive "tiles"), the pose pair from
 ``scenes.groundtruth.sample_pose_pair(spec, default_rng([s, i, 1]))`` and the exposure jitter from
 ``default_rng([s, i, 2])``, the zoom factor (when ``zoom`` is set) from ``default_rng([s, i, 4])`` and the
-crop window (when ``crop`` is set) from ``default_rng([s, i, 3])``.
+crop window (when ``crop`` is set) from ``default_rng([s, i, 3])`` and, with ``crop_focus``, whether and where
+it is moved onto the opening from ``default_rng([s, i, 5])``.
 Consecutive items share a scene (``pairs_per_scene``), and built scenes are kept in a small per-process
 (hence per-DataLoader-worker) cache, so a pair costs two renders (~35 ms at 320×240) rather than a scene
 build (~0.15 s).
@@ -17,7 +18,9 @@ in flight) and crops a random 160×120 window of both frames, which keeps a trai
 the two frames are first enlarged by a random factor (bicubic, through the same ``zoom_frame`` that
 :class:`~companion.flow.raft.backend.RaftBackend` enlarges frames with for ``input_scale``) and the flow is
 scaled with them, so that the network learns to run on enlarged camera frames, where its 1/8-resolution grid
-is finer relative to the camera's pixels.
+is finer relative to the camera's pixels.  A random crop of a zoomed frame mostly shows plain wall, whose flow
+is smooth; with ``crop_focus`` a share of the crops is moved to contain a pixel seen through the opening, so
+that the network learns the flow discontinuity at the opening's edge, which is what the gap detector reads.
 
 Each item is a dict of tensors: ``image1``/``image2`` 3×H×W float32 RGB in 0..255, ``flow`` 2×H×W float32
 (forward flow 1 -> 2, pixels; 0 where not valid), ``valid`` H×W float32 (1 where the flow is exact and unoccluded).
@@ -51,13 +54,16 @@ class RenderedFlowDataset(Dataset):
     the per-axis translation (m) and rotation (rad) bounds between the two poses, ``scene_cache`` how many
     built scenes to keep per process, ``zoom`` an optional (low, high) range of the factor both rendered
     frames are enlarged by (uniform; the flow is scaled with them), ``crop`` an optional (width, height)
-    window cut at a random place from both (zoomed) frames (items are then crop-sized).
+    window cut at a random place from both (zoomed) frames (items are then crop-sized), ``crop_focus`` the
+    probability that the window is instead placed to contain a random pixel of the background seen through
+    the opening (:func:`opening_pixels`; a frame that shows none keeps its random window).
     """
 
     def __init__(self, seed: int = 0, length: int = 100_000, width: int = DEFAULT_WIDTH,
                  height: int = DEFAULT_HEIGHT, pairs_per_scene: int = 8, exposure_jitter: float = 0.0,
                  max_step: float = 0.15, max_turn_rad: float = 0.05, scene_cache: int = 4,
-                 crop: tuple[int, int] | None = None, zoom: tuple[float, float] | None = None) -> None:
+                 crop: tuple[int, int] | None = None, zoom: tuple[float, float] | None = None,
+                 crop_focus: float = 0.0) -> None:
         if width <= 0 or height <= 0 or width % 8 or height % 8:
             raise ValueError(f"image size must be positive multiples of 8 (got {width}x{height})")
         if crop is not None:
@@ -72,6 +78,10 @@ class RenderedFlowDataset(Dataset):
             if crop is None:
                 raise ValueError("zoom needs a crop (zoomed frames are larger than the camera's)")
             zoom = (lo, hi)
+        if not 0.0 <= crop_focus <= 1.0:
+            raise ValueError(f"crop_focus must be a probability in [0, 1] (got {crop_focus})")
+        if crop_focus > 0 and crop is None:
+            raise ValueError("crop_focus needs a crop (it chooses where the crop window goes)")
         if length <= 0:
             raise ValueError("length must be positive")
         if pairs_per_scene <= 0:
@@ -88,6 +98,7 @@ class RenderedFlowDataset(Dataset):
         self.scene_cache = max(1, int(scene_cache))
         self.crop = crop
         self.zoom = zoom
+        self.crop_focus = float(crop_focus)
         self._scenes: OrderedDict[int, tuple] = OrderedDict()
         self._camera = None
 
@@ -127,8 +138,10 @@ class RenderedFlowDataset(Dataset):
             self._scenes.popitem(last=False)
         return entry
 
-    def pair(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(rgb1 H×W×3 float32, rgb2, flow H×W×2 float32, valid H×W bool) of item ``index``, as numpy."""
+    def render_pair(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(rgb1, rgb2, flow, valid, label1) of item ``index`` as rendered: whole frames, before zoom and crop.
+
+        ``label1`` is the first frame's surface labels (``scenes.splats.LABEL_*``)."""
         from scenes.groundtruth import flow_between, sample_pose_pair
         from scenes.render import render_splats
 
@@ -151,7 +164,20 @@ class RenderedFlowDataset(Dataset):
             offsets = rng.uniform(-20.0 * j, 20.0 * j, 2)
             img1 = np.clip(img1 * gains[0] + offsets[0], 0.0, 255.0)
             img2 = np.clip(img2 * gains[1] + offsets[1], 0.0, 255.0)
-        img1, img2 = img1.astype(np.float32), img2.astype(np.float32)
+        return img1.astype(np.float32), img2.astype(np.float32), flow, valid, r1.label
+
+    def pair(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(rgb1 H×W×3 float32, rgb2, flow H×W×2 float32, valid H×W bool) of item ``index``, as numpy."""
+        img1, img2, flow, valid, label1 = self.render_pair(index)
+        # with probability crop_focus, a background pixel (exact flow) the crop window will contain
+        focus = None
+        if self.crop is not None and self.crop_focus > 0:
+            focus_rng = np.random.default_rng([self.seed, index, 5])
+            if focus_rng.random() < self.crop_focus:
+                ys, xs = np.nonzero(opening_pixels(label1, valid))
+                if len(xs):
+                    k = int(focus_rng.integers(len(xs)))
+                    focus = (xs[k], ys[k], focus_rng)
         height, width = self.height, self.width
         if self.zoom is not None:
             factor = float(np.random.default_rng([self.seed, index, 4]).uniform(*self.zoom))
@@ -162,6 +188,12 @@ class RenderedFlowDataset(Dataset):
             rng = np.random.default_rng([self.seed, index, 3])
             x0 = int(rng.integers(0, width - cw + 1))
             y0 = int(rng.integers(0, height - ch + 1))
+            if focus is not None:
+                fx, fy, focus_rng = focus
+                # the chosen pixel (in zoomed coordinates) lands at a uniformly random place in the window
+                px, py = int((fx + 0.5) * width / self.width), int((fy + 0.5) * height / self.height)
+                x0 = int(np.clip(px - focus_rng.integers(0, cw), 0, width - cw))
+                y0 = int(np.clip(py - focus_rng.integers(0, ch), 0, height - ch))
             win = (slice(y0, y0 + ch), slice(x0, x0 + cw))
             img1, img2, flow, valid = img1[win], img2[win], flow[win], valid[win]
         return (np.ascontiguousarray(img1), np.ascontiguousarray(img2), np.ascontiguousarray(flow, np.float32),
@@ -175,6 +207,16 @@ class RenderedFlowDataset(Dataset):
             "flow": torch.from_numpy(np.ascontiguousarray(flow.transpose(2, 0, 1))),
             "valid": torch.from_numpy(valid.astype(np.float32)),
         }
+
+
+def opening_pixels(label: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
+    """H×W bool: pixels of the background beyond the wall (through the opening), from a render's labels.
+
+    ``valid`` (optional) keeps only those with exact flow."""
+    from scenes.splats import LABEL_BACKGROUND
+
+    far = np.asarray(label) == LABEL_BACKGROUND
+    return far & valid if valid is not None else far
 
 
 def zoom_pair(img1: np.ndarray, img2: np.ndarray, flow: np.ndarray, valid: np.ndarray,

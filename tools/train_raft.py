@@ -56,7 +56,8 @@ from tools.raft_data import (
 
 PROG = "flowgap-train-raft"
 TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height", "crop",
-              "zoom", "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters", "upsample")
+              "crop_focus", "zoom", "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters",
+              "upsample")
 UPSAMPLE_MODES = {"centres": False, "corners": True}   # --upsample -> RaftConfig.upsample_align_corners
 
 
@@ -262,6 +263,8 @@ def train(args: argparse.Namespace) -> dict:
             config["crop"] = "none"        # checkpoints from before --crop existed trained on whole frames
         if "zoom" not in stored:
             config["zoom"] = None          # nor did they zoom
+        if "crop_focus" not in stored:
+            config["crop_focus"] = 0.0     # nor move crops onto the opening
         if "upsample" not in stored:
             config["upsample"] = "corners"  # nor upsample from block centres
 
@@ -271,7 +274,7 @@ def train(args: argparse.Namespace) -> dict:
     dataset = RenderedFlowDataset(seed=config["seed"], length=max(1, config["steps"] * config["batch"]),
                                   width=config["width"], height=config["height"],
                                   pairs_per_scene=config["pairs_per_scene"], exposure_jitter=config["jitter"],
-                                  crop=parse_crop(config.get("crop", "none")),
+                                  crop=parse_crop(config.get("crop", "none")), crop_focus=config["crop_focus"],
                                   zoom=tuple(config["zoom"]) if config.get("zoom") else None)
     val = validation_set(config["val_size"], config["width"], config["height"]) if config["val_size"] else None
 
@@ -435,6 +438,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rendered image height (multiple of 8), also the validation frames'")
     d.add_argument("--crop", default="x".join(map(str, DEFAULT_CROP)),
                    help="train on a random WIDTHxHEIGHT window of each rendered pair (none: whole frames)")
+    d.add_argument("--crop-focus", dest="crop_focus", type=float, default=0.0, metavar="P",
+                   help="probability that a crop is placed to contain the opening (the background seen through "
+                        "it) rather than anywhere: random crops of zoomed frames mostly show plain wall")
     d.add_argument("--zoom", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
                    help="enlarge each rendered pair by a random factor in [LOW, HIGH] before cropping, so the "
                         "weights also fit the raft backend's input_scale (none: no zoom)")
@@ -500,6 +506,10 @@ def _check(args: argparse.Namespace) -> None:
     lo, hi = INPUT_SCALE_RANGE
     if not (math.isfinite(args.input_scale) and lo <= args.input_scale <= hi):
         raise CliError(f"--input-scale must be within {lo:g}..{hi:g} (got {args.input_scale})")
+    if not 0.0 <= args.crop_focus <= 1.0:
+        raise CliError(f"--crop-focus must be a probability in [0, 1] (got {args.crop_focus})")
+    if args.crop_focus > 0 and crop is None and not args.eval_only:
+        raise CliError("--crop-focus needs a --crop (it chooses where the crop goes)")
     if args.zoom is not None:
         lo, hi = args.zoom
         if not (1.0 <= lo <= hi and math.isfinite(hi)):

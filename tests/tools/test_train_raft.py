@@ -91,6 +91,14 @@ def test_dataset_flow_is_correct_where_valid():
     assert warped_err < 0.5 * plain_err        # and the flow explains the motion
 
 
+def _window_of(full: np.ndarray, crop: np.ndarray) -> tuple[int, int]:
+    ch, cw = crop.shape[:2]
+    hits = [(y, x) for y in range(full.shape[0] - ch + 1) for x in range(full.shape[1] - cw + 1)
+            if np.array_equal(full[y:y + ch, x:x + cw], crop)]
+    assert len(hits) == 1
+    return hits[0]
+
+
 def test_crop_is_a_seeded_window_of_the_full_pair():
     full = RenderedFlowDataset(seed=3, width=128, height=96)
     cropped = RenderedFlowDataset(seed=3, width=128, height=96, crop=(64, 64))
@@ -99,17 +107,47 @@ def test_crop_is_a_seeded_window_of_the_full_pair():
         f1, f2, ff, fv = full.pair(i)
         c1, c2, cf, cv = cropped.pair(i)
         assert c1.shape == (64, 64, 3) and cf.shape == (64, 64, 2) and cv.shape == (64, 64)
-        hits = [(y, x) for y in range(96 - 63) for x in range(128 - 63)
-                if np.array_equal(f1[y:y + 64, x:x + 64], c1)]
-        assert len(hits) == 1
-        y, x = hits[0]
+        y, x = _window_of(f1, c1)
         win = (slice(y, y + 64), slice(x, x + 64))
         assert np.array_equal(f2[win], c2) and np.array_equal(ff[win], cf) and np.array_equal(fv[win], cv)
-        windows.add(hits[0])
+        windows.add((y, x))
         assert np.array_equal(cropped.pair(i)[0], c1)          # deterministic
     assert len(windows) > 1                                     # the window moves from item to item
     with pytest.raises(ValueError, match="crop"):
         RenderedFlowDataset(width=128, height=96, crop=(160, 64))
+
+
+def test_crop_focus_moves_the_window_onto_the_opening():
+    from tools.raft_data import opening_pixels
+
+    settings = dict(seed=7, width=128, height=96, pairs_per_scene=2)
+    full = RenderedFlowDataset(**settings)
+    focused = RenderedFlowDataset(**settings, crop=(48, 48), crop_focus=1.0)
+    plain = RenderedFlowDataset(**settings, crop=(48, 48))
+    shown = {"focused": 0, "plain": 0}
+    frames_with_opening = 0
+    for i in range(8):
+        f1, _, _, fv, label = full.render_pair(i)
+        far = opening_pixels(label, fv)
+        if not far.any():
+            continue
+        frames_with_opening += 1
+        for name, ds in (("focused", focused), ("plain", plain)):
+            y, x = _window_of(f1, ds.pair(i)[0])
+            shown[name] += bool(far[y:y + 48, x:x + 48].any())
+        assert np.array_equal(focused.pair(i)[0], RenderedFlowDataset(**settings, crop=(48, 48),
+                                                                       crop_focus=1.0).pair(i)[0])
+    assert frames_with_opening >= 4
+    assert shown["focused"] == frames_with_opening       # every focused window shows the opening
+    assert shown["plain"] < frames_with_opening          # random windows often do not
+    # no focus: exactly the random windows of a dataset built without the option
+    for x, y in zip(RenderedFlowDataset(**settings, crop=(48, 48), crop_focus=0.0).pair(3), plain.pair(3),
+                    strict=True):
+        assert np.array_equal(x, y)
+    with pytest.raises(ValueError, match="crop_focus"):
+        RenderedFlowDataset(**settings, crop=(48, 48), crop_focus=1.5)
+    with pytest.raises(ValueError, match="crop"):
+        RenderedFlowDataset(**settings, crop_focus=0.5)
 
 
 def test_zoom_enlarges_the_pair_and_scales_its_flow_like_a_larger_camera():
@@ -223,7 +261,7 @@ def test_run_writes_loadable_weights_and_checkpoints(trained_run):
 
 def test_checkpoints_from_before_the_upsampling_choice_resume_with_corners(trained_run, tmp_path):
     old = torch.load(trained_run / "checkpoint-000002.pth", weights_only=True)
-    del old["upsample_align_corners"], old["train"]["config"]["upsample"]
+    del old["upsample_align_corners"], old["train"]["config"]["upsample"], old["train"]["config"]["crop_focus"]
     old["version"] = 1
     torch.save(old, tmp_path / "old.pth")
     rc = train_raft.main(["--resume", str(tmp_path / "old.pth"), "--stop-at", "3", "--out", str(tmp_path / "run"),
@@ -231,6 +269,7 @@ def test_checkpoints_from_before_the_upsampling_choice_resume_with_corners(train
     assert rc == 0
     resumed = torch.load(tmp_path / "run" / "checkpoint-000003.pth", weights_only=True)
     assert resumed["train"]["config"]["upsample"] == "corners" and resumed["upsample_align_corners"] is True
+    assert resumed["train"]["config"]["crop_focus"] == 0.0   # nor did they move crops onto the opening
     rc = train_raft.main(["--eval-only", str(tmp_path / "run" / "checkpoint-000003.pth"), "--width", "64",
                           "--height", "64", "--val-size", "1", "--val-iters", "1", "--out", str(tmp_path / "ev")])
     assert rc == 0
@@ -319,6 +358,8 @@ def test_missing_weights_file_is_a_one_line_error_exit_2(tmp_path):
     (["--zoom", "0.5", "2"], "--zoom must be 1 <= LOW <= HIGH"),
     (["--zoom", "1", "2", "--crop", "none"], "--zoom needs a --crop"),
     (["--input-scale", "0"], "--input-scale must be within"),
+    (["--crop-focus", "nan"], "--crop-focus must be a probability"),
+    (["--crop-focus", "0.5", "--crop", "none"], "--crop-focus needs a --crop"),
 ])
 def test_bad_input_is_a_one_line_error(argv, needle, tmp_path, capsys):
     rc = train_raft.main([*argv, "--out", str(tmp_path), "--quiet"])
