@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_vehicle.manual import ShapedSticks, Sticks, StickShape, shape_sticks, stick_acceleration, stick_velocity
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.params import ParameterStore
 from sitl_vehicle.sim import Setpoint
@@ -22,12 +23,16 @@ from sitl_vehicle.sim import Setpoint
 log = logging.getLogger(__name__)
 NAN = math.nan
 
-# COM_OBL_RC_ACT values for Return and Land; the others (Position, Altitude, Manual need RC) hold position
+# COM_OBL_RC_ACT values for Return and Land; the others (PX4: Position, Altitude, Manual, which need a pilot
+# on the sticks) hold position
 OBL_ACTION_RETURN = 3
 OBL_ACTION_LAND = 4
-# NAV_DLL_ACT (ground-station link loss) values: 0 none, 1 Hold, 2 Return, 3 Land, 5 terminate, 6 disarm
+# NAV_DLL_ACT (ground-station link loss) and NAV_RCL_ACT (manual control loss) values: 0 none, 1 Hold,
+# 2 Return, 3 Land, 5 terminate, 6 disarm
 DLL_ACTIONS = {1: FlightMode.AUTO_LOITER, 2: FlightMode.AUTO_RTL, 3: FlightMode.AUTO_LAND}
 DLL_STOP_MOTORS = (5, 6)
+# PX4 refuses to arm in Position or Altitude mode with the throttle stick above this (0.5 = centre)
+ARM_THROTTLE_MAX = 0.6
 
 # Return mode's legs, in order (PX4's RTL: climb, fly home at the return altitude, descend, wait, land)
 RTL_CLIMB, RTL_RETURN, RTL_DESCEND, RTL_LOITER, RTL_LAND = "climb", "return", "descend", "loiter", "land"
@@ -68,7 +73,8 @@ class CommanderOutput:
 
 
 class Commander:
-    """PX4-like commander/navigator for Takeoff, Hold, Land, Return and Offboard.
+    """PX4-like commander/navigator for Takeoff, Hold, Land, Return, Offboard, and the stick modes Position
+    and Altitude (``manual_control``).
 
     ``home`` (local NED) is where the vehicle last armed on the ground, as PX4 sets it; Takeoff altitudes
     and Return are relative to it.
@@ -96,6 +102,12 @@ class Commander:
         self._rtl_start_xy = (0.0, 0.0)
         self._rtl_z = 0.0
         self._rtl_loiter_since = 0.0
+        self._sticks: Sticks | None = None
+        self._sticks_time = -math.inf
+        self._manual_lost = False
+        self._stick_hold_xy: tuple[float, float] | None = None  # where centred sticks hold (Position mode)
+        self._stick_hold_z: float | None = None  # the altitude a centred throttle holds
+        self._stick_yawing = False
 
     # ----------------------------------------------------------------------------------- requests
     def arm(self, status: VehicleStatus, force: bool = False) -> Reply:
@@ -132,6 +144,10 @@ class Commander:
             return self.takeoff(status, NAN)
         if mode is FlightMode.AUTO_RTL:
             return self.return_to_launch(status)
+        if mode.manual and not self._manual_alive(status.time_s):
+            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED,
+                                f"Switching to {mode.label} is currently not possible: no manual control input "
+                                "(send MANUAL_CONTROL)")
         self.failsafe = False
         self._enter(mode, status)
         return ACCEPTED
@@ -175,6 +191,14 @@ class Commander:
         self._offboard_setpoint = setpoint
         self._offboard_time = time_s
 
+    def manual_control(self, sticks: Sticks, time_s: float) -> None:
+        """Stick input arrived (MANUAL_CONTROL; the MAVLink edge has already rejected malformed ones)."""
+        self._sticks = sticks
+        self._sticks_time = time_s
+        if self._manual_lost:
+            self._manual_lost = False
+            self._say(mavlink.MAV_SEVERITY_INFO, "Manual control regained")
+
     # ------------------------------------------------------------------------------------ update
     def update(self, status: VehicleStatus) -> CommanderOutput:
         now = status.time_s
@@ -184,6 +208,8 @@ class Commander:
             self._update_land_detector(status)
         if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(now):
             self._offboard_lost(status)
+        if self._sticks is not None and not self._manual_lost and not self._manual_alive(now):
+            self._manual_control_lost(status)
         if self._gcs_time is not None and not self._gcs_lost and now - self._gcs_time > self.params["COM_DL_LOSS_T"]:
             self._data_link_lost(status)
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
@@ -208,6 +234,8 @@ class Commander:
             return Setpoint(position=self._takeoff_target, yaw=self._hold_yaw)
         if self.mode is FlightMode.AUTO_RTL and not self.landing:
             return Setpoint(position=self._return_target(), yaw=self._hold_yaw)
+        if self.mode.manual and self._sticks is not None and (not status.landed or self._climb_requested()):
+            return self._stick_setpoint(status)
         if self.landing or (status.landed and not self._climb_requested()):
             # Descend (on the ground: keep pressing down, so the thrust winds down to idle).
             x, y = self._land_xy or status.position[:2]
@@ -217,7 +245,56 @@ class Commander:
         return Setpoint(position=target, yaw=self._hold_yaw)
 
     def _climb_requested(self) -> bool:
+        if self.mode.manual:
+            return self._sticks is not None and self._shaped_sticks().up > 0.0  # throttle above centre
         return self.mode is FlightMode.AUTO_LOITER and self._hold_target is not None and self._has_flown
+
+    def _stick_shape(self) -> StickShape:
+        p = self.params
+        optional = {field: p[name] for name, field in (("MPC_Z_VEL_MAX_UP", "vel_up_max"),
+                                                       ("MPC_Z_VEL_MAX_DN", "vel_down_max")) if name in p}
+        return StickShape(deadzone=p["MPC_HOLD_DZ"], xy_expo=p["MPC_XY_MAN_EXPO"], z_expo=p["MPC_Z_MAN_EXPO"],
+                          yaw_expo=p["MPC_YAW_EXPO"], vel_xy_max=p["MPC_VEL_MANUAL"],
+                          yaw_rate_max=math.radians(p["MPC_MAN_Y_MAX"]), tilt_max=math.radians(p["MPC_MAN_TILT_MAX"]),
+                          **optional)
+
+    def _shaped_sticks(self) -> ShapedSticks:
+        return shape_sticks(self._sticks or Sticks(), self._stick_shape())
+
+    def _stick_setpoint(self, status: VehicleStatus) -> Setpoint:
+        """Position/Altitude mode: the sticks' setpoint. A centred stick holds what it controls: the
+        altitude (throttle), the heading (yaw) and, in Position mode, the position where the vehicle stops."""
+        shape = self._stick_shape()
+        sticks = shape_sticks(self._sticks, shape)
+        if sticks.yaw != 0.0:
+            self._stick_yawing = True
+            yaw, yaw_rate = NAN, sticks.yaw * shape.yaw_rate_max
+        else:
+            if self._stick_yawing:
+                self._stick_yawing = False
+                self._hold_yaw = status.yaw
+            yaw, yaw_rate = self._hold_yaw, NAN
+        vn, ve, vd = stick_velocity(sticks, shape, status.yaw)
+        stop = None
+        if sticks.up != 0.0:
+            self._stick_hold_z = None
+            z = NAN
+        else:
+            if self._stick_hold_z is None:
+                stop = _stopping_point(status.position, status.velocity)
+                self._stick_hold_z = stop[2]
+            z, vd = self._stick_hold_z, NAN
+        if self.mode is FlightMode.ALTCTL:
+            an, ae = stick_acceleration(sticks, shape, status.yaw)
+            return Setpoint(position=(NAN, NAN, z), velocity=(NAN, NAN, vd), acceleration=(an, ae, NAN), yaw=yaw,
+                            yaw_rate=yaw_rate)
+        if not sticks.horizontal_centred:
+            self._stick_hold_xy = None
+            return Setpoint(position=(NAN, NAN, z), velocity=(vn, ve, vd), yaw=yaw, yaw_rate=yaw_rate)
+        if self._stick_hold_xy is None:
+            stop = stop or _stopping_point(status.position, status.velocity)
+            self._stick_hold_xy = (stop[0], stop[1])
+        return Setpoint(position=(*self._stick_hold_xy, z), velocity=(NAN, NAN, vd), yaw=yaw, yaw_rate=yaw_rate)
 
     def _enter(self, mode: FlightMode, status: VehicleStatus) -> None:
         if mode is not self.mode:
@@ -228,6 +305,9 @@ class Commander:
             self._hold_target = _stopping_point(status.position, status.velocity)
         elif mode is FlightMode.AUTO_LAND:
             self._land_xy = status.position[:2]
+        elif mode.manual:
+            self._stick_hold_xy = self._stick_hold_z = None  # set from the state when the sticks are centred
+            self._stick_yawing = False
         elif mode is FlightMode.AUTO_RTL:
             self._rtl_leg = RTL_CLIMB
             self._rtl_start_xy = status.position[:2]
@@ -295,6 +375,23 @@ class Commander:
         self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: offboard lost, switching to {target.label}")
         self._enter(target, status)
 
+    def _manual_control_lost(self, status: VehicleStatus) -> None:
+        """PX4's manual-control-loss failsafe, acted on (NAV_RCL_ACT) in the stick modes, which need it."""
+        self._manual_lost = True
+        self._say(mavlink.MAV_SEVERITY_CRITICAL, "Manual control lost")
+        if not (self.armed and self.mode.manual):
+            return
+        self.failsafe = True
+        action = int(self.params["NAV_RCL_ACT"])
+        if action in DLL_STOP_MOTORS:
+            self._disarm("Failsafe: manual control lost, motors stopped")
+            return
+        target = DLL_ACTIONS.get(action, FlightMode.AUTO_LOITER)
+        if target is FlightMode.AUTO_RTL and status.landed:
+            target = FlightMode.AUTO_LOITER
+        self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: manual control lost, switching to {target.label}")
+        self._enter(target, status)
+
     def _data_link_lost(self, status: VehicleStatus) -> None:
         """PX4's data-link-loss failsafe: only once a ground station had connected, only in the air."""
         self._gcs_lost = True
@@ -313,6 +410,9 @@ class Commander:
     def _offboard_alive(self, now: float) -> bool:
         return now - self._offboard_time <= self.params["COM_OF_LOSS_T"]
 
+    def _manual_alive(self, now: float) -> bool:
+        return self._sticks is not None and now - self._sticks_time <= self.params["COM_RC_LOSS_T"]
+
     def _arming_denied_reason(self, status: VehicleStatus) -> str | None:
         if status.crashed:
             return "vehicle crashed; restart the simulation"
@@ -324,6 +424,10 @@ class Commander:
             return f"{self.mode.label} mode is not armable; switch to Hold or Offboard"
         if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(status.time_s):
             return "no offboard setpoint stream"
+        if self.mode.manual and not self._manual_alive(status.time_s):
+            return f"manual control lost; {self.mode.label} mode needs MANUAL_CONTROL"
+        if self.mode.manual and self._sticks.throttle > ARM_THROTTLE_MAX:
+            return "throttle above center"
         return None
 
     def _disarm(self, text: str) -> None:

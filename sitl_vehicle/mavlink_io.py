@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander, Reply, VehicleStatus
+from sitl_vehicle.manual import ManualControlError, sticks_from_manual_control
 from sitl_vehicle.modes import FlightMode, UnsupportedMode, mode_from_custom
 from sitl_vehicle.params import ParameterError, ParameterStore
 from sitl_vehicle.sim import Setpoint
@@ -278,6 +279,8 @@ class MavlinkVehicleInterface:
         self.setpoints_received = 0
         self.setpoints_rejected = 0
         self._last_setpoint_warning = -math.inf
+        self.manual_rejected = 0
+        self._last_manual_warning = -math.inf
         self._boot_wall = time.time()
         self._statustext_id = 0
         self._after_ack: list = []  # messages a command asked for, sent right after its COMMAND_ACK
@@ -497,6 +500,21 @@ class MavlinkVehicleInterface:
             return
         self.setpoints_received += 1
         self.commander.offboard_setpoint(setpoint, status.time_s)
+
+    def _on_manual_control(self, msg, link: UdpLink) -> None:
+        if msg.target not in (0, self.system_id):
+            return
+        status = self.status_fn()
+        try:
+            sticks = sticks_from_manual_control(msg.x, msg.y, msg.z, msg.r)
+        except ManualControlError as exc:
+            self.manual_rejected += 1
+            if status.time_s - self._last_manual_warning >= 1.0:  # one warning a second, not one per message
+                self._last_manual_warning = status.time_s
+                log.warning("manual control rejected: %s", exc)
+                self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Manual control rejected: {exc}", link)
+            return
+        self.commander.manual_control(sticks, status.time_s)
 
     def _on_param_request_list(self, msg, link: UdpLink) -> None:
         if self._for_me(msg):

@@ -38,6 +38,8 @@ class FlightMode(enum.Enum):
     AUTO_LAND = (MAIN_AUTO, SUB_AUTO_LAND, "Land")
     AUTO_RTL = (MAIN_AUTO, SUB_AUTO_RTL, "Return")
     OFFBOARD = (MAIN_OFFBOARD, 0, "Offboard")
+    POSCTL = (MAIN_POSCTL, 0, "Position")
+    ALTCTL = (MAIN_ALTCTL, 0, "Altitude")
 
     @property
     def custom_mode(self) -> int:
@@ -49,10 +51,22 @@ class FlightMode(enum.Enum):
         return self.value[2]
 
     @property
+    def manual(self) -> bool:
+        """Flown with the sticks (MANUAL_CONTROL): Position and Altitude."""
+        return self.value[0] in (MAIN_POSCTL, MAIN_ALTCTL)
+
+    @property
     def base_mode_flags(self) -> int:
-        """The generic base_mode flags PX4 reports for this mode (without the armed flag)."""
-        return (mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
-                | mavlink.MAV_MODE_FLAG_AUTO_ENABLED | mavlink.MAV_MODE_FLAG_GUIDED_ENABLED)
+        """The generic base_mode flags PX4 reports for this mode (without the armed flag): manual input for
+        the stick modes, guided for those that hold position, auto for the autonomous ones."""
+        flags = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+        if self.manual:
+            flags |= mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        else:
+            flags |= mavlink.MAV_MODE_FLAG_AUTO_ENABLED
+        if self is not FlightMode.ALTCTL:
+            flags |= mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+        return flags
 
 
 class UnsupportedMode(ValueError):
@@ -62,9 +76,10 @@ class UnsupportedMode(ValueError):
 def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
     """Map a DO_SET_MODE (custom main, custom sub) pair to a FlightMode.
 
-    PX4 treats AUTO with sub mode 0 as Hold-like ready state; we map it to Hold. Modes that need an RC
-    link (Manual, Stabilized, Acro, Altitude, Position) are refused, as PX4 refuses them without RC;
-    Mission is not implemented (the README says so).
+    PX4 treats AUTO with sub mode 0 as Hold-like ready state; we map it to Hold. Position and Altitude
+    are flown with MANUAL_CONTROL sticks (any Position sub mode maps to plain Position); Manual, Stabilized
+    and Acro (direct attitude and thrust from the sticks) and Mission are not implemented (the README says
+    so).
     """
     for mode in FlightMode:
         main, sub, _ = mode.value
@@ -72,7 +87,11 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
             return mode
     if main_mode == MAIN_AUTO and sub_mode in (0, SUB_AUTO_READY):
         return FlightMode.AUTO_LOITER
-    raise UnsupportedMode(f"PX4 mode main={main_mode} sub={sub_mode} is not supported by this vehicle")
+    names = {MAIN_MANUAL: "Manual", MAIN_ACRO: "Acro", MAIN_STABILIZED: "Stabilized"}
+    name = names.get(main_mode) or ("Mission" if (main_mode, sub_mode) == (MAIN_AUTO, SUB_AUTO_MISSION) else None)
+    what = f"{name} (main={main_mode} sub={sub_mode})" if name else f"main={main_mode} sub={sub_mode}"
+    raise UnsupportedMode(f"PX4 mode {what} is not supported by this vehicle; it flies "
+                          f"{', '.join(m.label for m in FlightMode)}")
 
 
 def decode_custom_mode(custom_mode: int) -> tuple[int, int]:

@@ -318,3 +318,43 @@ def test_telemetry_reports_the_noisy_estimate_not_the_truth(make_vehicle):
     assert max(errors) < 0.15, "estimate far from truth"
     assert max(errors) > 1e-4, "telemetry equals the truth although noise is on"
     assert dataclasses.replace(server.config.vehicle).noise is not None
+
+
+def test_position_mode_flies_with_joystick_input_and_fails_safe_when_it_stops(make_vehicle):
+    """QGroundControl's virtual joystick: MANUAL_CONTROL at 20 Hz, Position mode, arm, climb, fly, hold."""
+    server, client = make_vehicle(params=(("COM_RC_LOSS_T", 1.5), ("NAV_RCL_ACT", 3.0)))
+    ack = client.set_mode("POSCTL")
+    assert ack.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # no joystick yet
+    client.stream_sticks()
+    time.sleep(0.3)
+    assert client.set_mode("POSCTL").result == mavlink.MAV_RESULT_ACCEPTED
+    assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "POSCTL") is not None
+    assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink.MAV_RESULT_ACCEPTED
+    client.stream_sticks(z=900)  # throttle up: take off and climb
+    assert client.recv("LOCAL_POSITION_NED", 15, lambda m: m.z < -1.5) is not None, "did not climb"
+    client.stream_sticks()  # centred: hold the altitude where the climb stops
+    assert client.recv("LOCAL_POSITION_NED", 10, lambda m: abs(m.vz) < 0.05) is not None
+    z_hold = server.sim.truth.position[2]
+    client.stream_sticks(x=700)  # forward (north, heading 0)
+    assert client.recv("LOCAL_POSITION_NED", 10, lambda m: m.x > 2.0) is not None, "did not fly forward"
+    client.stream_sticks()
+    stopped = client.recv("LOCAL_POSITION_NED", 10, lambda m: math.hypot(m.vx, m.vy) < 0.05)
+    assert stopped is not None, "did not stop when the sticks were centred"
+    time.sleep(1.0)  # 4 s of simulation: the position holds
+    x, y, z = server.sim.truth.position
+    assert abs(x - stopped.x) < 0.1 and abs(y) < 0.1 and abs(z - z_hold) < 0.15
+    client.stop_stream()
+    text = client.statustext("Failsafe: manual control lost", 5)
+    assert text is not None and "Land" in text
+    assert wait_until(lambda: not server.sim.armed, 30), "vehicle did not land and disarm"
+    assert not server.sim.crashed
+
+
+def test_malformed_manual_control_is_rejected_with_statustext(make_vehicle):
+    server, client = make_vehicle()
+    client.stream_sticks(z=1500)
+    text = client.statustext("Manual control rejected", 5)
+    assert text is not None and "z=1500" in text
+    client.stop_stream()
+    assert server.interface.manual_rejected > 0
+    assert client.set_mode("POSCTL").result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # none was used

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import dataclasses
 import socket
+import threading
 import time
 
 import pytest
 
 mavsdk = pytest.importorskip("mavsdk")
 from mavsdk.plugins.action import Action  # noqa: E402
+from mavsdk.plugins.manual_control import ManualControl  # noqa: E402
 from mavsdk.plugins.offboard import Offboard, PositionNedYaw  # noqa: E402
 from mavsdk.plugins.param import Param  # noqa: E402
 from mavsdk.plugins.telemetry import FlightMode, Telemetry  # noqa: E402
@@ -33,7 +35,8 @@ def wait_for(predicate, timeout: float, what: str):
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def test_mavsdk_connect_health_arm_takeoff_offboard_return_land():
+def _start():
+    """The vehicle on an ephemeral port and a MAVSDK ground station connected to it: (server, sdk, system)."""
     port = free_udp_port()
     config = ServerConfig(vehicle=dataclasses.replace(VehicleConfig(), noise=None),
                           gcs_local=("127.0.0.1", 0), gcs_remote=None, api_local=("127.0.0.1", 0),
@@ -45,6 +48,16 @@ def test_mavsdk_connect_health_arm_takeoff_offboard_return_land():
         system = sdk.first_autopilot(10.0)
         assert system is not None, "MAVSDK did not discover the vehicle as an autopilot"
         assert system.autopilot_type() == mavsdk.Autopilot.PX4
+    except BaseException:
+        sdk.destroy()
+        server.stop()
+        raise
+    return server, sdk, system
+
+
+def test_mavsdk_connect_health_arm_takeoff_offboard_return_land():
+    server, sdk, system = _start()
+    try:
         telemetry, action, offboard = Telemetry(system), Action(system), Offboard(system)
 
         wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
@@ -79,6 +92,45 @@ def test_mavsdk_connect_health_arm_takeoff_offboard_return_land():
         wait_for(lambda: not telemetry.armed(), 40, "landing and auto-disarm")
         assert server.sim.truth.position[2] > -0.05 and not server.sim.crashed
     finally:
+        sdk.destroy()
+        server.stop()
+
+
+def test_mavsdk_manual_control_position_and_altitude_modes():
+    """MAVSDK's manual_control example: stream joystick input, start Position control, arm, climb, switch to
+    Altitude control, land."""
+    server, sdk, system = _start()
+    telemetry, action, manual = Telemetry(system), Action(system), ManualControl(system)
+    sticks = [0.0, 0.0, 0.5, 0.0]  # x pitch, y roll, z throttle (0.5 = centre), r yaw
+    stop = threading.Event()
+
+    def send_sticks():
+        while not stop.wait(0.05):  # MAVSDK wants the input sent at 10 Hz or more
+            manual.set_manual_control_input(*sticks)
+
+    sender = threading.Thread(target=send_sticks, daemon=True)
+    try:
+        wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+        sender.start()
+        time.sleep(0.3)
+        manual.start_position_control()
+        wait_for(lambda: telemetry.flight_mode() == FlightMode.POSCTL, 5, "Position mode")
+        action.arm()
+        wait_for(telemetry.armed, 5, "armed telemetry")
+        sticks[2] = 0.9
+        wait_for(lambda: telemetry.position_velocity_ned().position.down_m < -1.2, 20, "climb on throttle")
+        sticks[2] = 0.5
+        manual.start_altitude_control()
+        wait_for(lambda: telemetry.flight_mode() == FlightMode.ALTCTL, 5, "Altitude mode")
+        sticks[0] = 0.5  # forward tilt: Altitude mode accelerates north
+        wait_for(lambda: server.sim.truth.velocity[0] > 0.5, 10, "forward flight in Altitude mode")
+        sticks[0] = 0.0
+        action.land()
+        wait_for(lambda: not telemetry.armed(), 40, "landing and auto-disarm")
+        assert not server.sim.crashed
+    finally:
+        stop.set()
+        sender.join(timeout=2)
         sdk.destroy()
         server.stop()
 

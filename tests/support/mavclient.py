@@ -23,6 +23,7 @@ class MavClient:
         self._stream_stop = threading.Event()
         self._stream_thread: threading.Thread | None = None
         self.setpoint: tuple | None = None
+        self.sticks: tuple | None = None
         self.sent_setpoints = 0
         self.lock = threading.Lock()
 
@@ -69,11 +70,23 @@ class MavClient:
     def stream(self, setpoint: tuple | None, hz: float = 20.0):
         """Keep re-sending ``setpoint`` (x, y, z) at ``hz`` from a thread, as MAVSDK's offboard does."""
         self.setpoint = setpoint
+        self._start_stream(hz)
+
+    def stream_sticks(self, x: int = 0, y: int = 0, z: int = 500, r: int = 0, hz: float = 20.0):
+        """Keep sending MANUAL_CONTROL (x pitch, y roll, r yaw -1000..1000, z throttle 0..1000 with 500 the
+        centre) at ``hz``, as QGroundControl's virtual joystick does."""
+        self.sticks = (x, y, z, r)
+        self._start_stream(hz)
+
+    def _start_stream(self, hz: float):
         if self._stream_thread is None:
             def loop():
                 while not self._stream_stop.wait(1.0 / hz):
                     if self.setpoint is not None:
                         self.send_position(*self.setpoint)
+                    if self.sticks is not None:
+                        with self.lock:
+                            self.conn.mav.manual_control_send(1, *self.sticks, 0)
             self._stream_thread = threading.Thread(target=loop, daemon=True)
             self._stream_thread.start()
 

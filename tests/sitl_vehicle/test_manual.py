@@ -1,0 +1,180 @@
+"""Position and Altitude modes: MANUAL_CONTROL sticks, their shaping, the commander's stick setpoints and the
+manual-control-loss failsafe."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_vehicle.commander import Commander, VehicleStatus
+from sitl_vehicle.manual import INT16_MAX, ManualControlError, Sticks, expo_deadzone, sticks_from_manual_control
+from sitl_vehicle.modes import FlightMode
+from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore
+
+CENTRED = Sticks()
+
+
+def status(t=0.0, pos=(0.0, 0.0, 0.0), vel=(0.0, 0.0, 0.0), yaw=0.0, landed=True, armed=False) -> VehicleStatus:
+    return VehicleStatus(time_s=t, position=pos, velocity=vel, yaw=yaw, armed=armed, landed=landed)
+
+
+def flying(t, pos=(0.0, 0.0, -2.0), **kw) -> VehicleStatus:
+    return status(t, pos=pos, landed=False, armed=True, **kw)
+
+
+@pytest.fixture
+def commander():
+    return Commander(ParameterStore(COMMANDER_PARAMS))
+
+
+def airborne_in(commander, mode: FlightMode, t: float = 1.0) -> Commander:
+    """Armed in ``mode`` with centred sticks, then in the air at 2 m."""
+    commander.manual_control(CENTRED, 0.0)
+    assert commander.set_mode(mode, status()).accepted
+    assert commander.arm(status()).accepted
+    commander.manual_control(CENTRED, t)
+    commander.update(flying(t))
+    return commander
+
+
+def test_manual_control_axes_map_like_px4():
+    s = sticks_from_manual_control(1000, -500, 750, 250)
+    assert (s.pitch, s.roll, s.throttle, s.yaw) == (1.0, -0.5, 0.75, 0.25)
+    unused = sticks_from_manual_control(INT16_MAX, INT16_MAX, INT16_MAX, INT16_MAX)
+    assert unused == CENTRED
+    for bad, name in (((1001, 0, 500, 0), "x=1001"), ((0, 0, -1, 0), "z=-1"), ((0, 0, 500, -2000), "r=-2000")):
+        with pytest.raises(ManualControlError, match=name):
+            sticks_from_manual_control(*bad)
+
+
+def test_stick_shaping_has_a_dead_zone_full_range_and_expo():
+    assert expo_deadzone(0.09, 0.6, 0.1) == 0.0
+    assert expo_deadzone(1.0, 0.6, 0.1) == pytest.approx(1.0)
+    assert expo_deadzone(-1.0, 0.6, 0.1) == pytest.approx(-1.0)
+    assert expo_deadzone(0.55, 0.0, 0.1) == pytest.approx(0.5)          # linear without expo
+    assert 0.0 < expo_deadzone(0.55, 1.0, 0.1) == pytest.approx(0.125)  # cubic with full expo
+    values = [expo_deadzone(v / 100, 0.6, 0.1) for v in range(-100, 101)]
+    assert all(b >= a for a, b in zip(values, values[1:], strict=False))
+
+
+@pytest.mark.parametrize("mode", [FlightMode.POSCTL, FlightMode.ALTCTL])
+def test_stick_modes_need_live_manual_control(commander, mode):
+    reply = commander.set_mode(mode, status())
+    assert not reply.accepted and "no manual control input" in reply.text and mode.label in reply.text
+    commander.manual_control(CENTRED, 0.0)
+    assert commander.set_mode(mode, status(0.2)).accepted
+    reply = commander.arm(status(t=5.0))  # sticks silent for longer than COM_RC_LOSS_T
+    assert not reply.accepted and "manual control lost" in reply.text
+
+
+def test_arming_in_position_mode_needs_the_throttle_at_or_below_centre(commander):
+    commander.manual_control(Sticks(throttle=0.9), 0.0)
+    assert commander.set_mode(FlightMode.POSCTL, status()).accepted
+    reply = commander.arm(status())
+    assert not reply.accepted and "throttle above center" in reply.text
+    commander.manual_control(CENTRED, 0.1)
+    assert commander.arm(status(0.1)).accepted
+
+
+def test_position_mode_on_the_ground_idles_until_the_throttle_is_raised(commander):
+    commander.manual_control(CENTRED, 0.0)
+    commander.set_mode(FlightMode.POSCTL, status())
+    commander.arm(status())
+    sp = commander.update(status(0.1, armed=True)).setpoint
+    assert sp.velocity[2] > 0  # pressing down: the thrust winds down to idle
+    commander.manual_control(Sticks(throttle=1.0), 0.2)
+    sp = commander.update(status(0.2, armed=True)).setpoint
+    assert sp.velocity[2] == pytest.approx(-3.0) and math.isnan(sp.position[2])  # full throttle: MPC_Z_VEL_MAX_UP
+
+
+def test_position_mode_sticks_fly_velocity_in_the_heading_frame_and_centred_sticks_hold(commander):
+    airborne_in(commander, FlightMode.POSCTL)
+    yaw = math.pi / 2  # facing east: forward stick flies east, right stick flies south
+    commander.manual_control(Sticks(pitch=1.0), 1.1)
+    sp = commander.update(flying(1.1, yaw=yaw)).setpoint
+    assert sp.velocity[0] == pytest.approx(0.0, abs=1e-9) and sp.velocity[1] == pytest.approx(10.0)
+    assert math.isnan(sp.position[0]) and sp.position[2] == pytest.approx(-2.0)  # throttle centred: altitude held
+    commander.manual_control(Sticks(roll=1.0), 1.2)
+    sp = commander.update(flying(1.2, yaw=yaw)).setpoint
+    assert sp.velocity[0] == pytest.approx(-10.0) and sp.velocity[1] == pytest.approx(0.0, abs=1e-9)
+    diagonal = Sticks(pitch=1.0, roll=1.0)
+    commander.manual_control(diagonal, 1.3)
+    sp = commander.update(flying(1.3)).setpoint
+    assert math.hypot(sp.velocity[0], sp.velocity[1]) == pytest.approx(10.0)  # MPC_VEL_MANUAL, not 14 m/s
+    # centred while flying north at 4 m/s: hold where the vehicle stops, ahead, not where the stick was let go
+    commander.manual_control(CENTRED, 1.4)
+    sp = commander.update(flying(1.4, pos=(5.0, 0.0, -2.0), vel=(4.0, 0.0, 0.0))).setpoint
+    assert sp.position[0] > 5.0 and sp.position[1] == pytest.approx(0.0) and math.isnan(sp.velocity[0])
+    held = sp.position
+    sp = commander.update(flying(1.5, pos=(6.0, 0.0, -2.0), vel=(2.0, 0.0, 0.0))).setpoint
+    assert sp.position == held  # the hold point stays put
+
+
+def test_yaw_stick_turns_at_a_rate_and_releasing_it_holds_the_heading(commander):
+    airborne_in(commander, FlightMode.POSCTL)
+    commander.manual_control(Sticks(yaw=1.0), 1.1)
+    sp = commander.update(flying(1.1)).setpoint
+    assert sp.yaw_rate == pytest.approx(math.radians(150.0)) and math.isnan(sp.yaw)  # MPC_MAN_Y_MAX
+    commander.manual_control(CENTRED, 1.2)
+    sp = commander.update(flying(1.2, yaw=0.7)).setpoint
+    assert sp.yaw == pytest.approx(0.7) and math.isnan(sp.yaw_rate)
+
+
+def test_throttle_stick_climbs_and_descends_at_the_manual_limits(commander):
+    airborne_in(commander, FlightMode.POSCTL)
+    commander.manual_control(Sticks(throttle=0.0), 1.1)
+    sp = commander.update(flying(1.1)).setpoint
+    assert sp.velocity[2] == pytest.approx(1.5) and math.isnan(sp.position[2])  # MPC_Z_VEL_MAX_DN
+    commander.manual_control(Sticks(throttle=0.52), 1.2)  # inside the dead zone: hold
+    sp = commander.update(flying(1.2, pos=(0.0, 0.0, -1.0))).setpoint
+    assert sp.position[2] == pytest.approx(-1.0) and math.isnan(sp.velocity[2])
+
+
+def test_altitude_mode_sticks_tilt_and_centred_sticks_level_without_holding_position(commander):
+    airborne_in(commander, FlightMode.ALTCTL)
+    commander.manual_control(Sticks(pitch=1.0), 1.1)
+    sp = commander.update(flying(1.1)).setpoint
+    assert sp.acceleration[0] == pytest.approx(9.80665 * math.tan(math.radians(35.0)))  # MPC_MAN_TILT_MAX
+    assert math.isnan(sp.position[0]) and math.isnan(sp.velocity[0]) and sp.position[2] == pytest.approx(-2.0)
+    commander.manual_control(CENTRED, 1.2)
+    sp = commander.update(flying(1.2, vel=(3.0, 0.0, 0.0))).setpoint
+    assert sp.acceleration[:2] == (0.0, 0.0) and math.isnan(sp.position[0]) and math.isnan(sp.velocity[0])
+
+
+@pytest.mark.parametrize("action, mode", [(2.0, FlightMode.AUTO_RTL), (3.0, FlightMode.AUTO_LAND),
+                                          (1.0, FlightMode.AUTO_LOITER), (0.0, FlightMode.AUTO_LOITER)])
+def test_manual_control_loss_fails_safe_as_nav_rcl_act_says(commander, action, mode):
+    commander.params.set("NAV_RCL_ACT", action)
+    airborne_in(commander, FlightMode.POSCTL)
+    out = commander.update(flying(1.4))  # 0.4 s of silence: within COM_RC_LOSS_T
+    assert out.mode is FlightMode.POSCTL and not commander.failsafe
+    out = commander.update(flying(1.6))
+    assert out.mode is mode and commander.failsafe and out.armed
+    texts = [t for _, t in commander.messages]
+    assert "Manual control lost" in texts and any(f"switching to {mode.label}" in t for t in texts)
+    commander.manual_control(CENTRED, 2.0)
+    assert commander.messages[-1][1] == "Manual control regained"
+
+
+def test_manual_control_loss_can_stop_the_motors_and_is_only_reported_in_other_modes(commander):
+    commander.params.set("NAV_RCL_ACT", 6.0)
+    airborne_in(commander, FlightMode.POSCTL)
+    assert not commander.update(flying(2.0)).armed
+    other = Commander(ParameterStore(COMMANDER_PARAMS))
+    other.manual_control(CENTRED, 0.0)
+    other.arm(status())
+    out = other.update(flying(2.0))
+    assert out.mode is FlightMode.AUTO_LOITER and out.armed and not other.failsafe
+    assert other.messages[-1][1] == "Manual control lost"
+
+
+def test_stick_modes_encode_like_px4():
+    for mode, name in ((FlightMode.POSCTL, "POSCTL"), (FlightMode.ALTCTL, "ALTCTL")):
+        assert mavutil.interpret_px4_mode(mode.base_mode_flags, mode.custom_mode) == name
+        assert mode.base_mode_flags & mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        assert not mode.base_mode_flags & mavlink.MAV_MODE_FLAG_AUTO_ENABLED
+    assert FlightMode.POSCTL.base_mode_flags & mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+    assert not FlightMode.AUTO_LOITER.base_mode_flags & mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
