@@ -3,26 +3,12 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-
-def _jsonable(value, digits: int | None = 5):
-    """JSON-safe copy: non-finite floats → None; floats rounded to ``digits`` (None: full precision)."""
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            return None
-        return value if digits is None else round(value, digits)
-    if isinstance(value, dict):
-        return {k: _jsonable(v, digits) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v, digits) for v in value]
-    if isinstance(value, np.generic):
-        return _jsonable(value.item(), digits)
-    return value
+from companion.jsonsafe import json_safe
 
 
 class RunLog:
@@ -55,17 +41,17 @@ class RunLog:
             cv2.imwrite(str(self.dir / "masks" / f"{step:03d}.png"), mask.astype(np.uint8) * 255)
 
     def decision(self, record: dict) -> None:
-        self._decisions.write(json.dumps(_jsonable(record)) + "\n")
+        self._decisions.write(json.dumps(json_safe(record, 5)) + "\n")
         self._decisions.flush()
 
     def frame(self, record: dict) -> None:
         # Full precision: replay re-renders from these poses, and the detector can turn a one-LSB pixel
         # difference into a different centroid.
-        self._frames.write(json.dumps(_jsonable(record, digits=None)) + "\n")
+        self._frames.write(json.dumps(json_safe(record)) + "\n")
         self._frames.flush()
 
     def summary(self, record: dict) -> None:
-        (self.dir / "summary.json").write_text(json.dumps(_jsonable(record), indent=2) + "\n")
+        (self.dir / "summary.json").write_text(json.dumps(json_safe(record, 5), indent=2) + "\n")
 
     def close(self) -> None:
         self._decisions.close()

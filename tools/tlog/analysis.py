@@ -29,7 +29,6 @@ Definitions used in the metrics (all times are tlog receive times, seconds from 
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -632,16 +631,3 @@ def _truth(rep: Report, f: Frames, mav: Any, name: str, src: tuple[int, int] | N
     if name != "auto":
         rep.note(f"truth source {name!r} not found in the log")
     return {"source": "none found", "looked_for": [TRUTH_SOURCES[c].message for c in candidates]}
-
-
-def finite_or_none(x: Any) -> Any:
-    """JSON-safe: NaN/inf → None, numpy scalars → Python."""
-    if isinstance(x, dict):
-        return {k: finite_or_none(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [finite_or_none(v) for v in x]
-    if isinstance(x, np.generic):
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x

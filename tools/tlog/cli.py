@@ -9,7 +9,8 @@ import sys
 import time
 from pathlib import Path
 
-from tools.tlog.analysis import TRUTH_AUTO_ORDER, analyse_tlog, finite_or_none, parse_truth_option
+from companion.jsonsafe import json_safe
+from tools.tlog.analysis import TRUTH_AUTO_ORDER, analyse_tlog, parse_truth_option
 
 PROG = "flowgap-tlog"
 EPILOG = f"""\
@@ -98,7 +99,7 @@ def _replay(argv: list[str]) -> int:
         print(f"{PROG}: error: replay: {exc}", file=sys.stderr)
         return 2
     out = args.out or args.run_dir / "replay.json"
-    out.write_text(json.dumps(finite_or_none(result), indent=2) + "\n")
+    out.write_text(json.dumps(json_safe(result), indent=2) + "\n")
     print(describe(result))
     print(f"wrote {out}")
     return 0
@@ -148,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{PROG}: error: cannot write to {args.out}: {exc.strerror or exc}", file=sys.stderr)
             return 2
     if args.json:
-        print(json.dumps(finite_or_none(rep.to_json()), indent=2))
+        print(json.dumps(json_safe(rep.to_json()), indent=2))
     else:
         from tools.tlog.output import summary_text
 

@@ -10,7 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from tools.tlog.analysis import Report, finite_or_none
+from companion.jsonsafe import json_safe
+from tools.tlog.analysis import Report
 from tools.tlog.framing import decode_columns
 
 log = logging.getLogger(__name__)
@@ -86,7 +87,7 @@ def report_markdown(rep: Report, plots: dict[str, str]) -> str:
         md += ["Nothing could be analysed.", ""]
         return "\n".join(md)
     v = m.get("vehicle")
-    flat_framing = finite_or_none({k: x for k, x in m["framing"].items() if not isinstance(x, dict)})
+    flat_framing = json_safe({k: x for k, x in m["framing"].items() if not isinstance(x, dict)})
     md += ["## Summary", "",
            f"- file: `{rep.path}` ({m['file_bytes']} bytes)",
            f"- start: {m['start_utc']}, duration {m['duration_s']:.2f} s",
@@ -237,7 +238,7 @@ def write_outputs(rep: Report, out_dir: str | Path, *, plots: bool = True, csv_d
     if csv_dir and rep.usable:
         written["csv"] = write_csvs(rep, out / "csv")
     (out / "report.md").write_text(report_markdown(rep, pngs))
-    (out / "metrics.json").write_text(json.dumps(finite_or_none(rep.to_json()), indent=2) + "\n")
+    (out / "metrics.json").write_text(json.dumps(json_safe(rep.to_json()), indent=2) + "\n")
     written["report"] = "report.md"
     written["metrics"] = "metrics.json"
     return written
