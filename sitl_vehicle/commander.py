@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.manual import ShapedSticks, Sticks, StickShape, shape_sticks, stick_acceleration, stick_velocity
+from sitl_vehicle.mission import NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, MissionItem
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.params import ParameterStore
 from sitl_vehicle.sim import Setpoint
@@ -36,6 +37,9 @@ ARM_THROTTLE_MAX = 0.6
 
 # Return mode's legs, in order (PX4's RTL: climb, fly home at the return altitude, descend, wait, land)
 RTL_CLIMB, RTL_RETURN, RTL_DESCEND, RTL_LOITER, RTL_LAND = "climb", "return", "descend", "loiter", "land"
+# Mission mode's phases within an item: climb (a Takeoff item, or the climb PX4 adds before a first waypoint
+# when started on the ground), fly to the item, hold there, land; done: holding at the last item
+MIS_CLIMB, MIS_FLY, MIS_HOLD, MIS_LAND, MIS_DONE = "climb", "fly", "hold", "land", "done"
 
 
 @dataclass(frozen=True)
@@ -73,8 +77,8 @@ class CommanderOutput:
 
 
 class Commander:
-    """PX4-like commander/navigator for Takeoff, Hold, Land, Return, Offboard, and the stick modes Position
-    and Altitude (``manual_control``).
+    """PX4-like commander/navigator for Takeoff, Hold, Land, Return, Mission (``set_mission``), Offboard, and
+    the stick modes Position and Altitude (``manual_control``).
 
     ``home`` (local NED) is where the vehicle last armed on the ground, as PX4 sets it; Takeoff altitudes
     and Return are relative to it.
@@ -108,6 +112,13 @@ class Commander:
         self._stick_hold_xy: tuple[float, float] | None = None  # where centred sticks hold (Position mode)
         self._stick_hold_z: float | None = None  # the altitude a centred throttle holds
         self._stick_yawing = False
+        self.mission: tuple[MissionItem, ...] = ()
+        self.mission_seq = 0  # the current item
+        self.mission_reached: deque[int] = deque(maxlen=64)  # items reached, for MISSION_ITEM_REACHED
+        self._mission_phase = MIS_DONE
+        self._mission_target: tuple[float, float, float] = (NAN, NAN, NAN)
+        self._mission_since = 0.0
+        self._mission_complete = False
 
     # ----------------------------------------------------------------------------------- requests
     def arm(self, status: VehicleStatus, force: bool = False) -> Reply:
@@ -144,6 +155,9 @@ class Commander:
             return self.takeoff(status, NAN)
         if mode is FlightMode.AUTO_RTL:
             return self.return_to_launch(status)
+        if mode is FlightMode.AUTO_MISSION and not self.mission:
+            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED,
+                                "Switching to Mission is currently not possible: no mission (upload one first)")
         if mode.manual and not self._manual_alive(status.time_s):
             return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED,
                                 f"Switching to {mode.label} is currently not possible: no manual control input "
@@ -191,6 +205,39 @@ class Commander:
         self._offboard_setpoint = setpoint
         self._offboard_time = time_s
 
+    def set_mission(self, items: list[MissionItem], status: VehicleStatus) -> None:
+        """A new mission (uploaded whole; empty clears it). Flying the old one, the vehicle holds instead."""
+        self.mission = tuple(items)
+        self.mission_seq = 0
+        self._mission_phase = MIS_DONE
+        self._mission_complete = False
+        if self.mode is FlightMode.AUTO_MISSION:
+            self._say(mavlink.MAV_SEVERITY_WARNING, "Mission changed in flight: switching to Hold")
+            self._enter(FlightMode.AUTO_LOITER, status)
+
+    def set_mission_current(self, seq: int, status: VehicleStatus) -> Reply:
+        """MISSION_SET_CURRENT: continue from item ``seq`` (at once when flying the mission)."""
+        if not 0 <= seq < len(self.mission):
+            return self._refuse(mavlink.MAV_RESULT_DENIED, f"Mission item {seq} does not exist (the mission has "
+                                                           f"{len(self.mission)} items)")
+        self.mission_seq = seq
+        if self.mode is FlightMode.AUTO_MISSION:
+            self._begin_mission_item(status)
+        return ACCEPTED
+
+    def start_mission(self, status: VehicleStatus, first: int = 0) -> Reply:
+        """MAV_CMD_MISSION_START: Mission mode from item ``first``."""
+        if self.mission and not 0 <= first < len(self.mission):
+            return self._refuse(mavlink.MAV_RESULT_DENIED, f"Mission start denied: no item {first}")
+        if self.mission:
+            self.mission_seq = first
+            self._mission_complete = False  # start from `first` rather than from the beginning
+        return self.set_mode(FlightMode.AUTO_MISSION, status)
+
+    @property
+    def mission_finished(self) -> bool:
+        return bool(self.mission) and self._mission_complete
+
     def manual_control(self, sticks: Sticks, time_s: float) -> None:
         """Stick input arrived (MANUAL_CONTROL; the MAVLink edge has already rejected malformed ones)."""
         self._sticks = sticks
@@ -219,12 +266,15 @@ class Commander:
                 self.mode = FlightMode.AUTO_LOITER
         if self.mode is FlightMode.AUTO_RTL and self.armed:
             self._advance_return(status)
+        if self.mode is FlightMode.AUTO_MISSION and self.armed:
+            self._advance_mission(status)
         return CommanderOutput(self.armed, self._setpoint(status), self.mode)
 
     @property
     def landing(self) -> bool:
         """Descending to land (Land mode, or Return's last leg)."""
-        return self.mode is FlightMode.AUTO_LAND or (self.mode is FlightMode.AUTO_RTL and self._rtl_leg == RTL_LAND)
+        return (self.mode is FlightMode.AUTO_LAND or (self.mode is FlightMode.AUTO_RTL and self._rtl_leg == RTL_LAND)
+                or (self.mode is FlightMode.AUTO_MISSION and self._mission_phase == MIS_LAND))
 
     # ---------------------------------------------------------------------------------- internals
     def _setpoint(self, status: VehicleStatus) -> Setpoint:
@@ -234,6 +284,8 @@ class Commander:
             return Setpoint(position=self._takeoff_target, yaw=self._hold_yaw)
         if self.mode is FlightMode.AUTO_RTL and not self.landing:
             return Setpoint(position=self._return_target(), yaw=self._hold_yaw)
+        if self.mode is FlightMode.AUTO_MISSION and not self.landing and self._climb_requested():
+            return Setpoint(position=self._mission_target, yaw=self._hold_yaw)
         if self.mode.manual and self._sticks is not None and (not status.landed or self._climb_requested()):
             return self._stick_setpoint(status)
         if self.landing or (status.landed and not self._climb_requested()):
@@ -247,6 +299,8 @@ class Commander:
     def _climb_requested(self) -> bool:
         if self.mode.manual:
             return self._sticks is not None and self._shaped_sticks().up > 0.0  # throttle above centre
+        if self.mode is FlightMode.AUTO_MISSION:
+            return self._mission_phase != MIS_LAND
         return self.mode is FlightMode.AUTO_LOITER and self._hold_target is not None and self._has_flown
 
     def _stick_shape(self) -> StickShape:
@@ -305,6 +359,11 @@ class Commander:
             self._hold_target = _stopping_point(status.position, status.velocity)
         elif mode is FlightMode.AUTO_LAND:
             self._land_xy = status.position[:2]
+        elif mode is FlightMode.AUTO_MISSION:
+            if self._mission_complete:
+                self.mission_seq = 0  # a finished mission starts again from its first item
+                self._mission_complete = False
+            self._begin_mission_item(status)
         elif mode.manual:
             self._stick_hold_xy = self._stick_hold_z = None  # set from the state when the sticks are centred
             self._stick_yawing = False
@@ -344,6 +403,79 @@ class Commander:
                 self._rtl_leg = RTL_LAND
                 self._land_xy = (hx, hy)
                 self._say(mavlink.MAV_SEVERITY_INFO, "Return: landing at home")
+
+    def _begin_mission_item(self, status: VehicleStatus) -> None:
+        item = self.mission[self.mission_seq]
+        x, y, z = status.position
+        if item.command == NAV_RETURN_TO_LAUNCH:
+            self._mission_item_reached(status)
+            if self.mode is FlightMode.AUTO_MISSION:  # unless the mission changed mode already
+                self._enter(FlightMode.AUTO_RTL, status)
+            return
+        if math.isfinite(item.yaw):
+            self._hold_yaw = item.yaw
+        has_xy = math.isfinite(item.north)
+        tx, ty = (item.north, item.east) if has_xy else (x, y)
+        self._mission_since = status.time_s
+        if item.command == NAV_LAND:
+            self._mission_target = (tx, ty, z)
+            self._mission_phase = MIS_FLY if has_xy else MIS_LAND
+            self._land_xy = (tx, ty)
+            return
+        tz = item.down(self.home[2])
+        if item.command == NAV_TAKEOFF or status.landed:
+            # PX4 climbs where it is first: a Takeoff item, or any first item flown from the ground
+            self._mission_target = (x, y, tz)
+            self._mission_phase = MIS_CLIMB
+            return
+        self._mission_target = (tx, ty, tz)
+        self._mission_phase = MIS_FLY
+
+    def _advance_mission(self, status: VehicleStatus) -> None:
+        """Move through the mission's items as PX4's navigator does (see MIS_* phases)."""
+        if not self.mission:
+            return
+        item = self.mission[self.mission_seq]
+        phase = self._mission_phase
+        now = status.time_s
+        reach = self.params["NAV_ACC_RAD"]
+        if phase == MIS_CLIMB and abs(status.position[2] - self._mission_target[2]) <= reach:
+            if item.command == NAV_TAKEOFF:
+                self._next_mission_item(status)
+            else:  # the climb before a waypoint: now fly to it
+                self._mission_target = (item.north, item.east, self._mission_target[2])
+                self._mission_phase = MIS_FLY
+        elif phase == MIS_FLY and math.dist(status.position, self._mission_target) <= max(reach,
+                                                                                          item.acceptance_radius):
+            if item.command == NAV_LAND:
+                self._mission_phase = MIS_LAND
+            elif item.hold_s > 0:
+                self._mission_item_reached(status)
+                self._mission_phase, self._mission_since = MIS_HOLD, now
+            else:
+                self._next_mission_item(status, reached=True)
+        elif phase == MIS_HOLD and now - self._mission_since >= item.hold_s:
+            self._next_mission_item(status)
+        elif phase == MIS_LAND and status.landed and not self._mission_complete:
+            self._mission_item_reached(status)
+            self._mission_complete = True  # still landing: the thrust winds down and the vehicle disarms
+            self._say(mavlink.MAV_SEVERITY_INFO, "Mission finished, landed")
+
+    def _next_mission_item(self, status: VehicleStatus, reached: bool = False) -> None:
+        item = self.mission[self.mission_seq]
+        if reached or item.command == NAV_TAKEOFF:
+            self._mission_item_reached(status)
+        if self.mission_seq + 1 < len(self.mission):
+            self.mission_seq += 1
+            self._begin_mission_item(status)
+        else:
+            self._mission_phase = MIS_DONE  # PX4 holds at the last item, still in Mission mode
+            self._mission_complete = True
+            self._say(mavlink.MAV_SEVERITY_INFO, "Mission finished, loitering")
+
+    def _mission_item_reached(self, status: VehicleStatus) -> None:
+        self.mission_reached.append(self.mission_seq)
+        log.info("mission item %d reached at t=%.2f s", self.mission_seq, status.time_s)
 
     def _update_land_detector(self, status: VehicleStatus) -> None:
         now = status.time_s
@@ -422,6 +554,8 @@ class Commander:
             return "vehicle is not landed"
         if self.mode in (FlightMode.AUTO_LAND, FlightMode.AUTO_RTL):
             return f"{self.mode.label} mode is not armable; switch to Hold or Offboard"
+        if self.mode is FlightMode.AUTO_MISSION and not self.mission:
+            return "no mission"
         if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(status.time_s):
             return "no offboard setpoint stream"
         if self.mode.manual and not self._manual_alive(status.time_s):

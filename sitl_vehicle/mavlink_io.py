@@ -21,6 +21,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander, Reply, VehicleStatus
 from sitl_vehicle.manual import ManualControlError, sticks_from_manual_control
+from sitl_vehicle.mission import MAX_ITEMS, MissionError, MissionItem, mission_item_from_message
 from sitl_vehicle.modes import FlightMode, UnsupportedMode, mode_from_custom
 from sitl_vehicle.params import ParameterError, ParameterStore
 from sitl_vehicle.sim import Setpoint
@@ -147,6 +148,7 @@ DEFAULT_STREAMS_HZ = {
     "BATTERY_STATUS": 1.0,
     "SYSTEM_TIME": 1.0,
     "VFR_HUD": 4.0,
+    "MISSION_CURRENT": 1.0,
 }
 
 
@@ -180,6 +182,12 @@ class Home:
         lat = self.lat_deg + math.degrees(ned[0] / EARTH_RADIUS_M)
         lon = self.lon_deg + math.degrees(ned[1] / (EARTH_RADIUS_M * math.cos(math.radians(self.lat_deg))))
         return lat, lon, self.alt_m - ned[2]
+
+    def to_local(self, lat_deg: float, lon_deg: float, alt_m: float) -> tuple[float, float, float]:
+        """(lat°, lon°, alt AMSL m) → flat-earth NED, the inverse of ``to_global``."""
+        north = math.radians(lat_deg - self.lat_deg) * EARTH_RADIUS_M
+        east = math.radians(lon_deg - self.lon_deg) * EARTH_RADIUS_M * math.cos(math.radians(self.lat_deg))
+        return north, east, self.alt_m - alt_m
 
 
 @dataclass
@@ -280,6 +288,7 @@ class MavlinkVehicleInterface:
         self.setpoints_rejected = 0
         self._last_setpoint_warning = -math.inf
         self.manual_rejected = 0
+        self._upload: dict | None = None  # the mission upload under way: link, count, items so far
         self._last_manual_warning = -math.inf
         self._boot_wall = time.time()
         self._statustext_id = 0
@@ -304,6 +313,10 @@ class MavlinkVehicleInterface:
                 link.send(msg)
 
     def send_streams(self, now: float) -> None:
+        reached = self.commander.mission_reached
+        while reached:  # as they happen, then the new current item
+            self.broadcast(mavlink.MAVLink_mission_item_reached_message(reached.popleft()))
+            self.broadcast(self.build("MISSION_CURRENT", None))
         telemetry = None
         for link in self.links:
             names = self.schedules[link.name].due(now)
@@ -315,8 +328,10 @@ class MavlinkVehicleInterface:
                 if msg is not None:
                     link.send(msg)
 
-    def build(self, name: str, t: Telemetry):
+    def build(self, name: str, t: Telemetry | None):
         """Encode one stream message from a telemetry snapshot (None if this vehicle cannot send it)."""
+        if name == "MISSION_CURRENT":
+            return self._mission_current()
         boot_ms = int(t.time_s * 1000) & 0xFFFFFFFF
         if name == "HEARTBEAT":
             base = t.mode.base_mode_flags | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if t.armed else 0)
@@ -454,6 +469,10 @@ class MavlinkVehicleInterface:
             except UnsupportedMode as exc:
                 return Reply(mavlink.MAV_RESULT_DENIED, f"Mode change denied: {exc}")
             return c.set_mode(mode, status)
+        if command == mavlink.MAV_CMD_MISSION_START:
+            return c.start_mission(status, int(_nan_to(p[0], 0)))
+        if command == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
+            return c.set_mission_current(int(_nan_to(p[0], 0)), status)
         if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             return self._set_interval(link, int(p[0]), p[1])
         if command == mavlink.MAV_CMD_REQUEST_MESSAGE:
@@ -548,22 +567,121 @@ class MavlinkVehicleInterface:
         return mavlink.MAVLink_param_value_message(name.encode(), self.params[name], mavlink.MAV_PARAM_TYPE_REAL32,
                                                    len(self.params), self.params.index(name))
 
-    def _on_mission_request_list(self, msg, link: UdpLink) -> None:
-        if self._for_me(msg):
-            link.send(mavlink.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), 0,
-                                                            getattr(msg, "mission_type", 0)))
+    # ------------------------------------------------------------------ missions (the MAVLink mission protocol)
+    def _mission_ack(self, link: UdpLink, msg, result: int, mission_type: int = mavlink.MAV_MISSION_TYPE_MISSION):
+        link.send(mavlink.MAVLink_mission_ack_message(msg.get_srcSystem(), msg.get_srcComponent(), result,
+                                                      mission_type))
+
+    def _mission_type_ok(self, msg, link: UdpLink, reply: bool = True) -> bool:
+        """Only plans of type MISSION are kept (no geofence or rally points): uploading others is refused
+        clearly (their lists read as empty, and clearing them succeeds)."""
+        mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        if mission_type == mavlink.MAV_MISSION_TYPE_MISSION:
+            return True
+        if reply:
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_UNSUPPORTED, mission_type)
+            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Mission type {mission_type} (geofence or rally points) "
+                                                          "is not supported: only missions", link)
+        return False
+
+    def _mission_current(self):
+        c = self.commander
+        if not c.mission:
+            state = mavlink.MISSION_STATE_NO_MISSION
+        elif c.mission_finished:
+            state = mavlink.MISSION_STATE_COMPLETE
+        elif c.mode is FlightMode.AUTO_MISSION:
+            state = mavlink.MISSION_STATE_ACTIVE
+        else:
+            state = mavlink.MISSION_STATE_NOT_STARTED if c.mission_seq == 0 else mavlink.MISSION_STATE_PAUSED
+        return mavlink.MAVLink_mission_current_message(c.mission_seq, len(c.mission), state, 0)
 
     def _on_mission_count(self, msg, link: UdpLink) -> None:
-        if self._for_me(msg):  # uploads are refused clearly rather than silently dropped
-            link.send(mavlink.MAVLink_mission_ack_message(msg.get_srcSystem(), msg.get_srcComponent(),
-                                                          mavlink.MAV_MISSION_UNSUPPORTED,
-                                                          getattr(msg, "mission_type", 0)))
+        if not self._for_me(msg) or not self._mission_type_ok(msg, link):
+            return
+        if msg.count > MAX_ITEMS:
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_NO_SPACE)
+            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Mission of {msg.count} items refused: at most "
+                                                          f"{MAX_ITEMS}", link)
+            return
+        if msg.count == 0:
+            self._upload = None
+            self.commander.set_mission([], self.status_fn())
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
+            return
+        self._upload = {"link": link, "count": msg.count, "items": []}  # a new COUNT restarts any upload
+        self._request_item(link, msg, 0)
+
+    def _request_item(self, link: UdpLink, msg, seq: int) -> None:
+        link.send(mavlink.MAVLink_mission_request_int_message(msg.get_srcSystem(), msg.get_srcComponent(), seq,
+                                                              mavlink.MAV_MISSION_TYPE_MISSION))
+
+    def _on_mission_item_int(self, msg, link: UdpLink) -> None:
+        if not self._for_me(msg) or not self._mission_type_ok(msg, link, reply=False):
+            return
+        upload = self._upload
+        if upload is None or upload["link"] is not link:
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_DENIED)  # no upload under way: send MISSION_COUNT
+            return
+        expected = len(upload["items"])
+        if msg.seq != expected:  # a repeat or a gap: ask again for the one we need
+            self._request_item(link, msg, expected)
+            return
+        try:
+            item = mission_item_from_message(msg, self.home.to_local)
+        except MissionError as exc:
+            self._upload = None
+            log.warning("mission upload refused: %s", exc)
+            self._mission_ack(link, msg, exc.result)
+            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Mission refused: {exc}", link)
+            return
+        upload["items"].append(item)
+        if len(upload["items"]) < upload["count"]:
+            self._request_item(link, msg, expected + 1)
+            return
+        self._upload = None
+        self.commander.set_mission(upload["items"], self.status_fn())
+        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
+        self.statustext(mavlink.MAV_SEVERITY_INFO, f"Mission accepted: {len(upload['items'])} items", link)
+
+    _on_mission_item = _on_mission_item_int  # the older float form (lat/lon in degrees) is read the same way
+
+    def _on_mission_request_list(self, msg, link: UdpLink) -> None:
+        if not self._for_me(msg):
+            return
+        mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        count = len(self.commander.mission) if mission_type == mavlink.MAV_MISSION_TYPE_MISSION else 0  # no fence
+        link.send(mavlink.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), count,
+                                                        mission_type))
+
+    def _on_mission_request_int(self, msg, link: UdpLink) -> None:
+        if not self._for_me(msg) or not self._mission_type_ok(msg, link):
+            return
+        mission: tuple[MissionItem, ...] = self.commander.mission
+        if not 0 <= msg.seq < len(mission):
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_INVALID_SEQUENCE)
+            return
+        link.send(mission[msg.seq].to_message(msg.seq == self.commander.mission_seq, msg.get_srcSystem(),
+                                              msg.get_srcComponent()))
+
+    _on_mission_request = _on_mission_request_int  # answered with MISSION_ITEM_INT, as PX4 does
 
     def _on_mission_clear_all(self, msg, link: UdpLink) -> None:
+        if not self._for_me(msg):
+            return
+        mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        if mission_type in (mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_ALL):
+            self._upload = None
+            self.commander.set_mission([], self.status_fn())
+        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, mission_type)  # no geofence or rally to clear
+
+    def _on_mission_set_current(self, msg, link: UdpLink) -> None:
         if self._for_me(msg):
-            link.send(mavlink.MAVLink_mission_ack_message(msg.get_srcSystem(), msg.get_srcComponent(),
-                                                          mavlink.MAV_MISSION_ACCEPTED,
-                                                          getattr(msg, "mission_type", 0)))
+            reply = self.commander.set_mission_current(msg.seq, self.status_fn())
+            if reply.accepted:
+                link.send(self._mission_current())
+            else:
+                self.statustext(mavlink.MAV_SEVERITY_WARNING, reply.text, link)
 
     def _on_ping(self, msg, link: UdpLink) -> None:
         if msg.target_system == 0:

@@ -38,6 +38,7 @@ class FlightMode(enum.Enum):
     AUTO_LAND = (MAIN_AUTO, SUB_AUTO_LAND, "Land")
     AUTO_RTL = (MAIN_AUTO, SUB_AUTO_RTL, "Return")
     OFFBOARD = (MAIN_OFFBOARD, 0, "Offboard")
+    AUTO_MISSION = (MAIN_AUTO, SUB_AUTO_MISSION, "Mission")
     POSCTL = (MAIN_POSCTL, 0, "Position")
     ALTCTL = (MAIN_ALTCTL, 0, "Altitude")
 
@@ -78,8 +79,7 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
 
     PX4 treats AUTO with sub mode 0 as Hold-like ready state; we map it to Hold. Position and Altitude
     are flown with MANUAL_CONTROL sticks (any Position sub mode maps to plain Position); Manual, Stabilized
-    and Acro (direct attitude and thrust from the sticks) and Mission are not implemented (the README says
-    so).
+    and Acro (direct attitude and thrust from the sticks) are not implemented (the README says so).
     """
     for mode in FlightMode:
         main, sub, _ = mode.value
@@ -88,7 +88,7 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
     if main_mode == MAIN_AUTO and sub_mode in (0, SUB_AUTO_READY):
         return FlightMode.AUTO_LOITER
     names = {MAIN_MANUAL: "Manual", MAIN_ACRO: "Acro", MAIN_STABILIZED: "Stabilized"}
-    name = names.get(main_mode) or ("Mission" if (main_mode, sub_mode) == (MAIN_AUTO, SUB_AUTO_MISSION) else None)
+    name = names.get(main_mode)
     what = f"{name} (main={main_mode} sub={sub_mode})" if name else f"main={main_mode} sub={sub_mode}"
     raise UnsupportedMode(f"PX4 mode {what} is not supported by this vehicle; it flies "
                           f"{', '.join(m.label for m in FlightMode)}")

@@ -12,6 +12,7 @@ import pytest
 mavsdk = pytest.importorskip("mavsdk")
 from mavsdk.plugins.action import Action  # noqa: E402
 from mavsdk.plugins.manual_control import ManualControl  # noqa: E402
+from mavsdk.plugins.mission import Mission, MissionItem, MissionPlan  # noqa: E402
 from mavsdk.plugins.offboard import Offboard, PositionNedYaw  # noqa: E402
 from mavsdk.plugins.param import Param  # noqa: E402
 from mavsdk.plugins.telemetry import FlightMode, Telemetry  # noqa: E402
@@ -131,6 +132,37 @@ def test_mavsdk_manual_control_position_and_altitude_modes():
     finally:
         stop.set()
         sender.join(timeout=2)
+        sdk.destroy()
+        server.stop()
+
+
+def test_mavsdk_mission_upload_download_fly_and_land():
+    """MAVSDK's mission example: upload waypoints, download them, arm, start (PX4 takes off by itself), wait
+    until finished, land."""
+    server, sdk, system = _start()
+    telemetry, action, mission = Telemetry(system), Action(system), Mission(system)
+    home = server.config.home
+    points = [(2.0, 0.0, 1.5), (2.0, 2.0, 2.0), (0.0, 2.0, 2.0)]
+    items = []
+    for north, east, up in points:
+        lat, lon, _ = home.to_global((north, east, 0.0))
+        items.append(MissionItem(latitude_deg=lat, longitude_deg=lon, relative_altitude_m=up, is_fly_through=False))
+    try:
+        wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+        mission.upload_mission(MissionPlan(items))
+        downloaded = mission.download_mission().mission_items
+        assert len(downloaded) == 3
+        assert abs(downloaded[1].latitude_deg - items[1].latitude_deg) < 1e-6
+        assert abs(downloaded[1].relative_altitude_m - 2.0) < 1e-3
+        action.arm()
+        mission.start_mission()
+        wait_for(lambda: telemetry.flight_mode() == FlightMode.MISSION, 5, "Mission mode")
+        wait_for(mission.is_mission_finished, 60, "the mission to finish")
+        assert _near(server.sim.truth.position, (0.0, 2.0, -2.0), 0.15)
+        action.land()
+        wait_for(lambda: not telemetry.armed(), 30, "landing and auto-disarm")
+        assert _near(server.sim.truth.position, (0.0, 2.0, 0.0), 0.15) and not server.sim.crashed
+    finally:
         sdk.destroy()
         server.stop()
 

@@ -1,0 +1,125 @@
+"""Missions: the items PX4's Mission mode flies, checked and converted to the local frame at upload.
+
+Pure: the MAVLink edge turns each MISSION_ITEM_INT into a :class:`MissionItem` with
+:func:`mission_item_from_message` (which raises :class:`MissionError` carrying the MAV_MISSION_RESULT and the
+reason), and the commander flies the list. Horizontal positions are converted to local NED at upload (the
+local frame's geodetic origin never moves); altitudes stay as sent, because a relative altitude is measured
+from home, which is set again at each arming, as PX4 does.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink
+
+# the MAV_CMDs a mission may hold, with PX4's names
+NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
+NAV_RETURN_TO_LAUNCH = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
+NAV_LAND = mavlink.MAV_CMD_NAV_LAND
+NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
+SUPPORTED_COMMANDS = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_RETURN_TO_LAUNCH: "NAV_RETURN_TO_LAUNCH",
+                      NAV_LAND: "NAV_LAND", NAV_TAKEOFF: "NAV_TAKEOFF"}
+# frames: altitude relative to home, or above mean sea level
+RELATIVE_FRAMES = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+AMSL_FRAMES = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
+MAX_ITEMS = 500
+MAX_DISTANCE_M = 10_000.0  # a waypoint farther than this from the local origin is a mistake (e.g. lat/lon 0)
+
+
+class MissionError(ValueError):
+    """An item that cannot be flown: ``result`` is the MAV_MISSION_RESULT to answer with."""
+
+    def __init__(self, result: int, text: str):
+        super().__init__(text)
+        self.result = result
+
+
+@dataclass(frozen=True)
+class MissionItem:
+    """One checked item. ``lat``/``lon`` (deg) and ``alt`` (m) are as sent, for download; ``north``/``east``
+    are the local position (NaN: where the vehicle is, for a Takeoff or Land without coordinates);
+    ``alt_relative`` says whether ``alt`` is above home (else above mean sea level, ``amsl_down`` locally)."""
+
+    seq: int
+    command: int
+    frame: int
+    params: tuple[float, float, float, float]
+    lat: float
+    lon: float
+    alt: float
+    north: float
+    east: float
+    alt_relative: bool
+    amsl_down: float  # for an altitude above mean sea level: its local down coordinate
+    autocontinue: bool = True
+
+    @property
+    def name(self) -> str:
+        return SUPPORTED_COMMANDS[self.command]
+
+    @property
+    def hold_s(self) -> float:
+        """NAV_WAYPOINT param1: seconds to hold at the waypoint."""
+        return self.params[0] if self.command == NAV_WAYPOINT and self.params[0] > 0 else 0.0
+
+    @property
+    def acceptance_radius(self) -> float:
+        """NAV_WAYPOINT param2 (m; 0: the NAV_ACC_RAD default)."""
+        return self.params[1] if self.command == NAV_WAYPOINT and self.params[1] > 0 else 0.0
+
+    @property
+    def yaw(self) -> float:
+        """param4, the heading to fly (rad; NaN: keep the heading)."""
+        yaw = self.params[3]
+        return math.radians(yaw) if math.isfinite(yaw) else math.nan
+
+    def down(self, home_down: float) -> float:
+        """The item's local NED down coordinate, given home's."""
+        return home_down - self.alt if self.alt_relative else self.amsl_down
+
+    def to_message(self, current: bool, target_system: int, target_component: int):
+        return mavlink.MAVLink_mission_item_int_message(
+            target_system, target_component, self.seq, self.frame, self.command, int(current), int(self.autocontinue),
+            *self.params, int(round(self.lat * 1e7)), int(round(self.lon * 1e7)), self.alt,
+            mavlink.MAV_MISSION_TYPE_MISSION)
+
+
+def mission_item_from_message(msg, to_local) -> MissionItem:
+    """MISSION_ITEM_INT (or the older float MISSION_ITEM) -> MissionItem; ``to_local(lat, lon, alt_amsl)`` ->
+    local (north, east, down).
+
+    Raises MissionError naming the item, what is wrong and what to send instead."""
+    seq = msg.seq
+    where = f"mission item {seq}"
+    if msg.command not in SUPPORTED_COMMANDS:
+        raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED,
+                           f"{where}: command {msg.command} is not supported; use "
+                           + ", ".join(f"{name} ({cmd})" for cmd, name in SUPPORTED_COMMANDS.items()))
+    if msg.frame not in RELATIVE_FRAMES + AMSL_FRAMES:
+        raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED_FRAME,
+                           f"{where}: frame {msg.frame} is not supported; use MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6) "
+                           "or MAV_FRAME_GLOBAL_INT (5)")
+    scale = 1e-7 if msg.get_type() == "MISSION_ITEM_INT" else 1.0
+    lat, lon, alt = msg.x * scale, msg.y * scale, float(msg.z)
+    params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))  # NaN: the default
+    if not math.isfinite(alt):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM7, f"{where}: altitude is {alt}; send metres")
+    amsl_down = to_local(0.0, 0.0, alt)[2] if msg.frame in AMSL_FRAMES else math.nan
+    no_position = not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0.0 and lon == 0.0)
+    if no_position and msg.command in (NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH):
+        north = east = math.nan  # "here", as PX4 reads a Takeoff or Land without coordinates
+    elif no_position:
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
+                           f"{where}: {SUPPORTED_COMMANDS[msg.command]} needs a latitude and longitude")
+    else:
+        north, east, _ = to_local(lat, lon, alt)
+        distance = math.hypot(north, east)
+        if distance > MAX_DISTANCE_M:
+            raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
+                               f"{where}: {lat:.7f}, {lon:.7f} is {distance / 1000:.0f} km from home; send "
+                               "coordinates near home")
+    return MissionItem(seq=seq, command=msg.command, frame=msg.frame, params=params, lat=lat, lon=lon, alt=alt,
+                       north=north, east=east, alt_relative=msg.frame in RELATIVE_FRAMES, amsl_down=amsl_down,
+                       autocontinue=bool(msg.autocontinue))
