@@ -221,6 +221,7 @@ class Commander:
             return self._refuse(mavlink.MAV_RESULT_DENIED, f"Mission item {seq} does not exist (the mission has "
                                                            f"{len(self.mission)} items)")
         self.mission_seq = seq
+        self._mission_complete = False  # entering Mission mode continues from here rather than from item 0
         if self.mode is FlightMode.AUTO_MISSION:
             self._begin_mission_item(status)
         return ACCEPTED
@@ -272,7 +273,7 @@ class Commander:
 
     @property
     def landing(self) -> bool:
-        """Descending to land (Land mode, or Return's last leg)."""
+        """Descending to land (Land mode, Return's last leg, or a mission's Land item)."""
         return (self.mode is FlightMode.AUTO_LAND or (self.mode is FlightMode.AUTO_RTL and self._rtl_leg == RTL_LAND)
                 or (self.mode is FlightMode.AUTO_MISSION and self._mission_phase == MIS_LAND))
 
@@ -409,7 +410,9 @@ class Commander:
         x, y, z = status.position
         if item.command == NAV_RETURN_TO_LAUNCH:
             self._mission_item_reached(status)
-            if self.mode is FlightMode.AUTO_MISSION:  # unless the mission changed mode already
+            if status.landed:  # nothing to return from: the mission ends here
+                self._mission_phase, self._mission_complete = MIS_LAND, True
+            elif self.mode is FlightMode.AUTO_MISSION:  # unless the mission changed mode already
                 self._enter(FlightMode.AUTO_RTL, status)
             return
         if math.isfinite(item.yaw):

@@ -677,11 +677,8 @@ class MavlinkVehicleInterface:
 
     def _on_mission_set_current(self, msg, link: UdpLink) -> None:
         if self._for_me(msg):
-            reply = self.commander.set_mission_current(msg.seq, self.status_fn())
-            if reply.accepted:
+            if self.commander.set_mission_current(msg.seq, self.status_fn()).accepted:  # else it says why
                 link.send(self._mission_current())
-            else:
-                self.statustext(mavlink.MAV_SEVERITY_WARNING, reply.text, link)
 
     def _on_ping(self, msg, link: UdpLink) -> None:
         if msg.target_system == 0:

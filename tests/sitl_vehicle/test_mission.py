@@ -162,3 +162,18 @@ def test_bad_uploads_are_refused_with_the_reason_and_keep_the_old_mission(make_v
     assert client.recv("MISSION_ACK", 3).type == mavlink.MAV_MISSION_ACCEPTED
     assert server.commander.mission == ()
     assert client.set_mode("MISSION").result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+
+
+def test_a_return_item_hands_over_to_return_mode_and_set_current_skips_ahead():
+    from sitl_vehicle.mission import NAV_RETURN_TO_LAUNCH
+
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.set_mission([item(0, NAV_WAYPOINT, north=3.0, alt=1.5), item(1, NAV_WAYPOINT, north=6.0, alt=1.5),
+                   item(2, NAV_RETURN_TO_LAUNCH, here=True)], status(0))
+    c.arm(status(0), force=True)
+    assert c.set_mission_current(1, status(0.1)).accepted
+    air = status(0.2, pos=(0.0, 0.0, -1.5), landed=False, armed=True)
+    assert c.set_mode(FlightMode.AUTO_MISSION, air).accepted
+    assert c.update(air).setpoint.position == pytest.approx((6.0, 0.0, -1.5), abs=0.01)  # item 1, not 0
+    out = c.update(status(1.0, pos=(6.0, 0.0, -1.5), landed=False, armed=True))
+    assert list(c.mission_reached) == [1, 2] and out.mode is FlightMode.AUTO_RTL
