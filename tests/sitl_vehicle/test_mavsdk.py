@@ -36,8 +36,9 @@ def wait_for(predicate, timeout: float, what: str):
     raise AssertionError(f"timed out waiting for {what}")
 
 
-def _start():
-    """The vehicle on an ephemeral port and a MAVSDK ground station connected to it: (server, sdk, system)."""
+@pytest.fixture
+def px4_system():
+    """The vehicle on an ephemeral port and a MAVSDK ground station connected to it: (server, system)."""
     port = free_udp_port()
     config = ServerConfig(vehicle=dataclasses.replace(VehicleConfig(), noise=None),
                           gcs_local=("127.0.0.1", 0), gcs_remote=None, api_local=("127.0.0.1", 0),
@@ -49,58 +50,52 @@ def _start():
         system = sdk.first_autopilot(10.0)
         assert system is not None, "MAVSDK did not discover the vehicle as an autopilot"
         assert system.autopilot_type() == mavsdk.Autopilot.PX4
-    except BaseException:
-        sdk.destroy()
-        server.stop()
-        raise
-    return server, sdk, system
-
-
-def test_mavsdk_connect_health_arm_takeoff_offboard_return_land():
-    server, sdk, system = _start()
-    try:
-        telemetry, action, offboard = Telemetry(system), Action(system), Offboard(system)
-
-        wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
-        health = telemetry.health()
-        assert health.is_home_position_ok and health.is_local_position_ok and health.is_armable
-
-        action.set_takeoff_altitude(1.5)
-        assert abs(action.get_takeoff_altitude() - 1.5) < 1e-3
-        action.arm()
-        wait_for(telemetry.armed, 5, "armed telemetry")
-        action.takeoff()
-        wait_for(lambda: abs(telemetry.position_velocity_ned().position.down_m + 1.5) < 0.1, 20, "takeoff altitude")
-
-        offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -1.5, 0.0))
-        offboard.start()
-        wait_for(lambda: telemetry.flight_mode() == FlightMode.OFFBOARD, 5, "offboard mode")
-        offboard.set_position_ned(PositionNedYaw(1.0, -0.5, -1.5, 0.0))
-        wait_for(lambda: _near(telemetry.position_velocity_ned().position, (1.0, -0.5, -1.5), 0.05), 20,
-                 "offboard position")
-        assert _near(server.sim.truth.position, (1.0, -0.5, -1.5), 0.06)
-
-        offboard.stop()  # MAVSDK switches to Hold
-        action.set_return_to_launch_altitude(2.0)                     # RTL_RETURN_ALT
-        assert abs(action.get_return_to_launch_altitude() - 2.0) < 1e-3
-        Param(system).set_param_float("RTL_DESCEND_ALT", 1.0)
-        Param(system).set_param_float("RTL_LAND_DELAY", -1.0)           # wait over home until told to land
-        action.return_to_launch()
-        wait_for(lambda: telemetry.flight_mode() == FlightMode.RETURN_TO_LAUNCH, 5, "return mode")
-        wait_for(lambda: _near(telemetry.position_velocity_ned().position, (0.0, 0.0, -1.0), 0.1), 30,
-                 "return home to RTL_DESCEND_ALT")
-        action.land()
-        wait_for(lambda: not telemetry.armed(), 40, "landing and auto-disarm")
-        assert server.sim.truth.position[2] > -0.05 and not server.sim.crashed
+        yield server, system
     finally:
         sdk.destroy()
         server.stop()
 
 
-def test_mavsdk_manual_control_position_and_altitude_modes():
+def test_mavsdk_connect_health_arm_takeoff_offboard_return_land(px4_system):
+    server, system = px4_system
+    telemetry, action, offboard = Telemetry(system), Action(system), Offboard(system)
+    wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+    health = telemetry.health()
+    assert health.is_home_position_ok and health.is_local_position_ok and health.is_armable
+
+    action.set_takeoff_altitude(1.5)
+    assert abs(action.get_takeoff_altitude() - 1.5) < 1e-3
+    action.arm()
+    wait_for(telemetry.armed, 5, "armed telemetry")
+    action.takeoff()
+    wait_for(lambda: abs(telemetry.position_velocity_ned().position.down_m + 1.5) < 0.1, 20, "takeoff altitude")
+
+    offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -1.5, 0.0))
+    offboard.start()
+    wait_for(lambda: telemetry.flight_mode() == FlightMode.OFFBOARD, 5, "offboard mode")
+    offboard.set_position_ned(PositionNedYaw(1.0, -0.5, -1.5, 0.0))
+    wait_for(lambda: _near(telemetry.position_velocity_ned().position, (1.0, -0.5, -1.5), 0.05), 20,
+             "offboard position")
+    assert _near(server.sim.truth.position, (1.0, -0.5, -1.5), 0.06)
+
+    offboard.stop()  # MAVSDK switches to Hold
+    action.set_return_to_launch_altitude(2.0)                     # RTL_RETURN_ALT
+    assert abs(action.get_return_to_launch_altitude() - 2.0) < 1e-3
+    Param(system).set_param_float("RTL_DESCEND_ALT", 1.0)
+    Param(system).set_param_float("RTL_LAND_DELAY", -1.0)           # wait over home until told to land
+    action.return_to_launch()
+    wait_for(lambda: telemetry.flight_mode() == FlightMode.RETURN_TO_LAUNCH, 5, "return mode")
+    wait_for(lambda: _near(telemetry.position_velocity_ned().position, (0.0, 0.0, -1.0), 0.1), 30,
+             "return home to RTL_DESCEND_ALT")
+    action.land()
+    wait_for(lambda: not telemetry.armed(), 40, "landing and auto-disarm")
+    assert server.sim.truth.position[2] > -0.05 and not server.sim.crashed
+
+
+def test_mavsdk_manual_control_position_and_altitude_modes(px4_system):
     """MAVSDK's manual_control example: stream joystick input, start Position control, arm, climb, switch to
     Altitude control, land."""
-    server, sdk, system = _start()
+    server, system = px4_system
     telemetry, action, manual = Telemetry(system), Action(system), ManualControl(system)
     sticks = [0.0, 0.0, 0.5, 0.0]  # x pitch, y roll, z throttle (0.5 = centre), r yaw
     stop = threading.Event()
@@ -132,14 +127,12 @@ def test_mavsdk_manual_control_position_and_altitude_modes():
     finally:
         stop.set()
         sender.join(timeout=2)
-        sdk.destroy()
-        server.stop()
 
 
-def test_mavsdk_mission_upload_download_fly_and_land():
+def test_mavsdk_mission_upload_download_fly_and_land(px4_system):
     """MAVSDK's mission example: upload waypoints, download them, arm, start (PX4 takes off by itself), wait
     until finished, land."""
-    server, sdk, system = _start()
+    server, system = px4_system
     telemetry, action, mission = Telemetry(system), Action(system), Mission(system)
     home = server.config.home
     points = [(2.0, 0.0, 1.5), (2.0, 2.0, 2.0), (0.0, 2.0, 2.0)]
@@ -147,24 +140,20 @@ def test_mavsdk_mission_upload_download_fly_and_land():
     for north, east, up in points:
         lat, lon, _ = home.to_global((north, east, 0.0))
         items.append(MissionItem(latitude_deg=lat, longitude_deg=lon, relative_altitude_m=up, is_fly_through=False))
-    try:
-        wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
-        mission.upload_mission(MissionPlan(items))
-        downloaded = mission.download_mission().mission_items
-        assert len(downloaded) == 3
-        assert abs(downloaded[1].latitude_deg - items[1].latitude_deg) < 1e-6
-        assert abs(downloaded[1].relative_altitude_m - 2.0) < 1e-3
-        action.arm()
-        mission.start_mission()
-        wait_for(lambda: telemetry.flight_mode() == FlightMode.MISSION, 5, "Mission mode")
-        wait_for(mission.is_mission_finished, 60, "the mission to finish")
-        assert _near(server.sim.truth.position, (0.0, 2.0, -2.0), 0.15)
-        action.land()
-        wait_for(lambda: not telemetry.armed(), 30, "landing and auto-disarm")
-        assert _near(server.sim.truth.position, (0.0, 2.0, 0.0), 0.15) and not server.sim.crashed
-    finally:
-        sdk.destroy()
-        server.stop()
+    wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+    mission.upload_mission(MissionPlan(items))
+    downloaded = mission.download_mission().mission_items
+    assert len(downloaded) == 3
+    assert abs(downloaded[1].latitude_deg - items[1].latitude_deg) < 1e-6
+    assert abs(downloaded[1].relative_altitude_m - 2.0) < 1e-3
+    action.arm()
+    mission.start_mission()
+    wait_for(lambda: telemetry.flight_mode() == FlightMode.MISSION, 5, "Mission mode")
+    wait_for(mission.is_mission_finished, 60, "the mission to finish")
+    assert _near(server.sim.truth.position, (0.0, 2.0, -2.0), 0.15)
+    action.land()
+    wait_for(lambda: not telemetry.armed(), 30, "landing and auto-disarm")
+    assert _near(server.sim.truth.position, (0.0, 2.0, 0.0), 0.15) and not server.sim.crashed
 
 
 def _near(position, target, tol) -> bool:
