@@ -60,6 +60,7 @@ class VehicleStatus:
 class Reply:
     result: int  # MAV_RESULT
     text: str | None = None  # reason, also sent as STATUSTEXT when the command is refused
+    announced: bool = False  # the commander has queued the STATUSTEXT already (``messages``)
 
     @property
     def accepted(self) -> bool:
@@ -575,7 +576,7 @@ class Commander:
 
     def _refuse(self, result: int, text: str) -> Reply:
         self._say(mavlink.MAV_SEVERITY_CRITICAL, text)
-        return Reply(result, text)
+        return Reply(result, text, announced=True)
 
     def _say(self, severity: int, text: str) -> None:
         log.info("%s", text)

@@ -428,7 +428,7 @@ class MavlinkVehicleInterface:
         for follow_up in self._after_ack:
             link.send(follow_up)
         self._after_ack.clear()
-        if reply.text and not reply.accepted:
+        if reply.text and not reply.accepted and not reply.announced:  # one STATUSTEXT per refusal, as PX4
             self.statustext(mavlink.MAV_SEVERITY_CRITICAL, reply.text, link)
 
     def _on_heartbeat(self, msg, link: UdpLink) -> None:

@@ -95,6 +95,7 @@ def test_arming_refused_with_reason_in_land_mode(make_vehicle):
     assert ack.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
     text = client.statustext("Arming denied", 3)
     assert text is not None and "Land mode is not armable" in text
+    assert client.statustext("Arming denied", 1.0) is None  # said once, as PX4 says it
 
 
 def _offboard_hover(make_vehicle, **params):
