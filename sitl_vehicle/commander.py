@@ -19,7 +19,7 @@ from sitl_vehicle.manual import ShapedSticks, Sticks, StickShape, shape_sticks, 
 from sitl_vehicle.mission import NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, MissionItem
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.params import ParameterStore
-from sitl_vehicle.sim import Setpoint
+from sitl_vehicle.sim import AttitudeSetpoint, Setpoint
 
 log = logging.getLogger(__name__)
 NAN = math.nan
@@ -32,8 +32,10 @@ OBL_ACTION_LAND = 4
 # 2 Return, 3 Land, 5 terminate, 6 disarm
 DLL_ACTIONS = {1: FlightMode.AUTO_LOITER, 2: FlightMode.AUTO_RTL, 3: FlightMode.AUTO_LAND}
 DLL_STOP_MOTORS = (5, 6)
-# PX4 refuses to arm in Position or Altitude mode with the throttle stick above this (0.5 = centre)
+# PX4 refuses to arm in Position or Altitude mode with the throttle stick above this (0.5 = centre), and in
+# Stabilized or Manual mode unless the throttle is low
 ARM_THROTTLE_MAX = 0.6
+ARM_THROTTLE_LOW = 0.2
 
 # Return mode's legs, in order (PX4's RTL: climb, fly home at the return altitude, descend, wait, land)
 RTL_CLIMB, RTL_RETURN, RTL_DESCEND, RTL_LOITER, RTL_LAND = "climb", "return", "descend", "loiter", "land"
@@ -79,7 +81,7 @@ class CommanderOutput:
 
 class Commander:
     """PX4-like commander/navigator for Takeoff, Hold, Land, Return, Mission (``set_mission``), Offboard, and
-    the stick modes Position and Altitude (``manual_control``).
+    the stick modes Position, Altitude, Stabilized and Manual (``manual_control``).
 
     ``home`` (local NED) is where the vehicle last armed on the ground, as PX4 sets it; Takeoff altitudes
     and Return are relative to it.
@@ -279,7 +281,7 @@ class Commander:
                 or (self.mode is FlightMode.AUTO_MISSION and self._mission_phase == MIS_LAND))
 
     # ---------------------------------------------------------------------------------- internals
-    def _setpoint(self, status: VehicleStatus) -> Setpoint:
+    def _setpoint(self, status: VehicleStatus) -> Setpoint | AttitudeSetpoint:
         if self.mode is FlightMode.OFFBOARD and self._offboard_setpoint is not None:
             return self._offboard_setpoint
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
@@ -288,7 +290,8 @@ class Commander:
             return Setpoint(position=self._return_target(), yaw=self._hold_yaw)
         if self.mode is FlightMode.AUTO_MISSION and not self.landing and self._climb_requested():
             return Setpoint(position=self._mission_target, yaw=self._hold_yaw)
-        if self.mode.manual and self._sticks is not None and (not status.landed or self._climb_requested()):
+        if self.mode.manual and self._sticks is not None and (not status.landed or self._climb_requested()
+                                                              or self.mode.attitude_from_sticks):
             return self._stick_setpoint(status)
         if self.landing or (status.landed and not self._climb_requested()):
             # Descend (on the ground: keep pressing down, so the thrust winds down to idle).
@@ -317,11 +320,15 @@ class Commander:
     def _shaped_sticks(self) -> ShapedSticks:
         return shape_sticks(self._sticks or Sticks(), self._stick_shape())
 
-    def _stick_setpoint(self, status: VehicleStatus) -> Setpoint:
-        """Position/Altitude mode: the sticks' setpoint. A centred stick holds what it controls: the
-        altitude (throttle), the heading (yaw) and, in Position mode, the position where the vehicle stops."""
+    def _stick_setpoint(self, status: VehicleStatus) -> Setpoint | AttitudeSetpoint:
+        """The sticks' setpoint. Stabilized/Manual: roll and pitch angles up to MPC_MAN_TILT_MAX, a yaw rate and
+        the throttle as they are. Position/Altitude: a centred stick holds what it controls: the altitude
+        (throttle), the heading (yaw) and, in Position mode, the position where the vehicle stops."""
         shape = self._stick_shape()
         sticks = shape_sticks(self._sticks, shape)
+        if self.mode.attitude_from_sticks:  # forward stick pitches the nose down (negative pitch, FRD)
+            return AttitudeSetpoint(roll=sticks.right * shape.tilt_max, pitch=-sticks.forward * shape.tilt_max,
+                                    yaw_rate=sticks.yaw * shape.yaw_rate_max, throttle=self._sticks.throttle)
         if sticks.yaw != 0.0:
             self._stick_yawing = True
             yaw, yaw_rate = NAN, sticks.yaw * shape.yaw_rate_max
@@ -564,6 +571,8 @@ class Commander:
             return "no offboard setpoint stream"
         if self.mode.manual and not self._manual_alive(status.time_s):
             return f"manual control lost; {self.mode.label} mode needs MANUAL_CONTROL"
+        if self.mode.attitude_from_sticks and self._sticks.throttle > ARM_THROTTLE_LOW:
+            return "throttle not low; pull it down to arm"
         if self.mode.manual and self._sticks.throttle > ARM_THROTTLE_MAX:
             return "throttle above center"
         return None

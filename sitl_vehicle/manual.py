@@ -1,4 +1,5 @@
-"""Manual control (a joystick or RC through MAVLink MANUAL_CONTROL) for PX4's Position and Altitude modes.
+"""Manual control (a joystick or RC through MAVLink MANUAL_CONTROL) for PX4's stick modes: Position, Altitude,
+Stabilized and Manual.
 
 Pure functions: the MAVLink edge turns MANUAL_CONTROL into :class:`Sticks`, the commander turns sticks into
 velocity or acceleration setpoints with :func:`shape_sticks` and :func:`stick_velocity`. Conventions are
@@ -69,7 +70,7 @@ class StickShape:
     vel_up_max: float = 3.0          # MPC_Z_VEL_MAX_UP, m/s at full throttle
     vel_down_max: float = 1.5        # MPC_Z_VEL_MAX_DN, m/s at zero throttle
     yaw_rate_max: float = math.radians(150.0)  # MPC_MAN_Y_MAX, rad/s at full yaw stick
-    tilt_max: float = math.radians(35.0)       # MPC_MAN_TILT_MAX, tilt at full stick in Altitude mode
+    tilt_max: float = math.radians(35.0)       # MPC_MAN_TILT_MAX, tilt at full stick (Altitude, Stabilized)
 
 
 @dataclass(frozen=True)

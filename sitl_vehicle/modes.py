@@ -41,6 +41,8 @@ class FlightMode(enum.Enum):
     AUTO_MISSION = (MAIN_AUTO, SUB_AUTO_MISSION, "Mission")
     POSCTL = (MAIN_POSCTL, 0, "Position")
     ALTCTL = (MAIN_ALTCTL, 0, "Altitude")
+    STABILIZED = (MAIN_STABILIZED, 0, "Stabilized")
+    MANUAL = (MAIN_MANUAL, 0, "Manual")  # a multicopter flies Manual as Stabilized, as PX4's does
 
     @property
     def custom_mode(self) -> int:
@@ -53,8 +55,13 @@ class FlightMode(enum.Enum):
 
     @property
     def manual(self) -> bool:
-        """Flown with the sticks (MANUAL_CONTROL): Position and Altitude."""
-        return self.value[0] in (MAIN_POSCTL, MAIN_ALTCTL)
+        """Flown with the sticks (MANUAL_CONTROL): Position, Altitude, Stabilized and Manual."""
+        return self.value[0] in (MAIN_POSCTL, MAIN_ALTCTL, MAIN_STABILIZED, MAIN_MANUAL)
+
+    @property
+    def attitude_from_sticks(self) -> bool:
+        """The sticks set the attitude and the throttle the thrust (no altitude or position hold)."""
+        return self.value[0] in (MAIN_STABILIZED, MAIN_MANUAL)
 
     @property
     def base_mode_flags(self) -> int:
@@ -65,7 +72,7 @@ class FlightMode(enum.Enum):
             flags |= mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
         else:
             flags |= mavlink.MAV_MODE_FLAG_AUTO_ENABLED
-        if self is not FlightMode.ALTCTL:
+        if self is FlightMode.POSCTL or not self.manual:
             flags |= mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
         return flags
 
@@ -78,8 +85,9 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
     """Map a DO_SET_MODE (custom main, custom sub) pair to a FlightMode.
 
     PX4 treats AUTO with sub mode 0 as Hold-like ready state; we map it to Hold. Position and Altitude
-    are flown with MANUAL_CONTROL sticks (any Position sub mode maps to plain Position); Manual, Stabilized
-    and Acro (direct attitude and thrust from the sticks) are not implemented (the README says so).
+    and, with the attitude and thrust straight from the sticks, Stabilized and Manual are flown with
+    MANUAL_CONTROL sticks (any Position sub mode maps to plain Position); Acro (body rates from the sticks)
+    is not implemented (the README says so).
     """
     for mode in FlightMode:
         main, sub, _ = mode.value
@@ -87,7 +95,7 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
             return mode
     if main_mode == MAIN_AUTO and sub_mode in (0, SUB_AUTO_READY):
         return FlightMode.AUTO_LOITER
-    names = {MAIN_MANUAL: "Manual", MAIN_ACRO: "Acro", MAIN_STABILIZED: "Stabilized"}
+    names = {MAIN_ACRO: "Acro"}
     name = names.get(main_mode)
     what = f"{name} (main={main_mode} sub={sub_mode})" if name else f"main={main_mode} sub={sub_mode}"
     raise UnsupportedMode(f"PX4 mode {what} is not supported by this vehicle; it flies "

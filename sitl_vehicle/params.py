@@ -96,18 +96,18 @@ COMMANDER_PARAMS = [
     ParamSpec("RTL_DESCEND_ALT", 30.0, 0.5, 100.0, "m", "Return: descend to this altitude above home, then land"),
     ParamSpec("RTL_LAND_DELAY", 0.0, -1.0, 300.0, "s", "Return: hover this long above home before landing "
               "(<0: hover until told otherwise)"),
-    # Position and Altitude modes (MANUAL_CONTROL from a joystick), sitl_vehicle.manual
+    # the stick modes (MANUAL_CONTROL from a joystick), sitl_vehicle.manual
     ParamSpec("COM_RC_LOSS_T", 0.5, 0.0, 35.0, "s", "Manual control timeout before the manual-control-loss "
-              "failsafe (Position and Altitude modes)"),
-    ParamSpec("NAV_RCL_ACT", 2.0, 0.0, 6.0, "enum", "Manual control loss action in Position and Altitude modes: "
+              "failsafe (stick modes)"),
+    ParamSpec("NAV_RCL_ACT", 2.0, 0.0, 6.0, "enum", "Manual control loss action in the stick modes: "
               "1 = Hold, 2 = Return, 3 = Land, 5/6 = stop the motors (terminate/disarm); others: Hold"),
-    ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 1.0, "-", "Stick dead zone of Position and Altitude modes"),
+    ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 1.0, "-", "Stick dead zone of the stick modes"),
     ParamSpec("MPC_XY_MAN_EXPO", 0.6, 0.0, 1.0, "-", "Horizontal stick expo (0 linear, 1 cubic)"),
     ParamSpec("MPC_Z_MAN_EXPO", 0.6, 0.0, 1.0, "-", "Throttle stick expo (0 linear, 1 cubic)"),
     ParamSpec("MPC_YAW_EXPO", 0.6, 0.0, 1.0, "-", "Yaw stick expo (0 linear, 1 cubic)"),
     ParamSpec("MPC_VEL_MANUAL", 10.0, 1.0, 20.0, "m/s", "Position mode: horizontal speed at full stick"),
     ParamSpec("MPC_MAN_Y_MAX", 150.0, 0.0, 400.0, "deg/s", "Yaw rate at full yaw stick"),
-    ParamSpec("MPC_MAN_TILT_MAX", 35.0, 1.0, 85.0, "deg", "Altitude mode: tilt at full stick"),
+    ParamSpec("MPC_MAN_TILT_MAX", 35.0, 1.0, 85.0, "deg", "Altitude and Stabilized modes: tilt at full stick"),
     ParamSpec("SYS_AUTOSTART", 4001.0, 0.0, 1e6, "", "Airframe id (4001: generic quadrotor X)"),
 ]
 

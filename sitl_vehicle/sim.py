@@ -17,6 +17,10 @@ Setpoints (:class:`Setpoint`, NaN = axis not controlled):
 * acceleration components are passed through where neither position nor velocity is set.
 * yaw: finite ``yaw`` is tracked; else a finite ``yaw_rate`` is integrated; else the heading is held.
 
+:class:`AttitudeSetpoint` (Stabilized flight from the sticks) bypasses position and velocity control: roll
+and pitch angles, a yaw rate, and a throttle mapped to collective thrust as PX4 does (stick centre = hover
+thrust).
+
 Crash (collision or hard ground impact): motors stop, the vehicle disarms, ``crashed`` latches.
 """
 
@@ -33,7 +37,7 @@ from sitl_vehicle.control.attitude import AttitudeControl
 from sitl_vehicle.control.config import ControlConfig
 from sitl_vehicle.control.mixer import Mixer
 from sitl_vehicle.control.position import PositionControl, PositionControlStates, TrajectorySetpoint
-from sitl_vehicle.control.qmath import bodyz_to_attitude, euler_from_quat, wrap_pi, yaw_from_quat
+from sitl_vehicle.control.qmath import bodyz_to_attitude, euler_from_quat, quat_from_euler, wrap_pi, yaw_from_quat
 from sitl_vehicle.control.rate import RateControl
 from sitl_vehicle.dynamics import QuadDynamics
 from sitl_vehicle.estimator import Estimator
@@ -41,7 +45,8 @@ from sitl_vehicle.sensors import Imu, PoseSensor, SensorNoise
 from sitl_vehicle.trajectory import PlannerConfig, TrapezoidPlanner, VelocitySlew
 
 __all__ = [
-    "AIRFRAMES", "Airframe", "ControlConfig", "PlannerConfig", "SensorNoise", "Setpoint", "VehicleConfig",
+    "AIRFRAMES", "Airframe", "AttitudeSetpoint", "ControlConfig", "PlannerConfig", "SensorNoise", "Setpoint",
+    "VehicleConfig",
     "VehicleSim", "VehicleState", "CollisionWorld", "GroundOnly", "GRAVITY",
 ]
 
@@ -61,6 +66,25 @@ class Setpoint:
     acceleration: tuple[float, float, float] = NAN3  # m/s^2, NED
     yaw: float = NAN  # rad
     yaw_rate: float = NAN  # rad/s
+
+
+@dataclass(frozen=True)
+class AttitudeSetpoint:
+    """Stabilized flight: roll and pitch (rad), yaw rate (rad/s) and throttle (0..1, 0.5 = hover thrust)."""
+
+    roll: float = 0.0
+    pitch: float = 0.0
+    yaw_rate: float = 0.0
+    throttle: float = 0.0
+
+
+def throttle_to_thrust(throttle: float, hover: float, thrust_min: float, thrust_max: float) -> float:
+    """PX4's manual throttle curve (MPC_THR_CURVE 0): 0 -> thrust_min, 0.5 -> hover, 1 -> thrust_max, linear
+    in between, so that a centred stick hovers."""
+    t = min(max(throttle, 0.0), 1.0)
+    if t <= 0.5:
+        return thrust_min + (hover - thrust_min) * t / 0.5
+    return hover + (thrust_max - hover) * (t - 0.5) / 0.5
 
 
 @dataclass(frozen=True)
@@ -112,7 +136,7 @@ class VehicleSim:
         self._apply_control_config(config.control)
         self.armed = False
         self.motor_command = (0.0, 0.0, 0.0, 0.0)
-        self._setpoint: Setpoint | None = None
+        self._setpoint: Setpoint | AttitudeSetpoint | None = None
         self._yaw_sp = float(initial_yaw)
         self._q_sp = self.dyn.attitude
         self._thrust_sp = 0.0
@@ -219,7 +243,7 @@ class VehicleSim:
         return self._ref
 
     @property
-    def setpoint(self) -> Setpoint | None:
+    def setpoint(self) -> Setpoint | AttitudeSetpoint | None:
         return self._setpoint
 
     # ------------------------------------------------------------------ commands
@@ -230,12 +254,21 @@ class VehicleSim:
         if armed and not self.armed:
             self._reset_controllers()
             self.armed = True
-            if self._setpoint is not None:
+            if isinstance(self._setpoint, Setpoint):
                 self._apply_setpoint(self._setpoint, fresh=True)
         elif not armed:
             self.armed = False
 
-    def set_setpoint(self, sp: Setpoint) -> None:
+    def set_setpoint(self, sp: Setpoint | AttitudeSetpoint) -> None:
+        if isinstance(sp, AttitudeSetpoint):
+            if not isinstance(self._setpoint, AttitudeSetpoint):
+                self.planner.clear()
+                self.slew.reset()
+            self._setpoint = sp
+            return
+        if isinstance(self._setpoint, AttitudeSetpoint):
+            self._setpoint = None  # back to position control: plan from the state, not from a stale reference
+            self._yaw_sp = yaw_from_quat(self.estimate.attitude)
         self._apply_setpoint(sp, fresh=False)
 
     def clear_setpoint(self) -> None:
@@ -350,6 +383,9 @@ class VehicleSim:
         sp = self._setpoint
         t = self.time_s
         dtp = self._pos_dt
+        if isinstance(sp, AttitudeSetpoint):
+            self._stabilized(sp, dtp)
+            return
         est = self.estimator
         dyn = self.dyn
         if est is not None:
@@ -407,6 +443,18 @@ class VehicleSim:
         n = math.sqrt(tx * tx + ty * ty + tz * tz)
         self._thrust_sp = n
         self._q_sp = bodyz_to_attitude((-tx, -ty, -tz) if n > 1e-9 else (0.0, 0.0, 1.0), self._yaw_sp)
+
+
+    def _stabilized(self, sp: AttitudeSetpoint, dtp: float) -> None:
+        """Stabilized flight: attitude from the sticks (yaw integrated from the rate), thrust from the throttle."""
+        c = self.control_config
+        tilt = min(math.hypot(sp.roll, sp.pitch), c.tilt_max_rad)
+        scale = tilt / math.hypot(sp.roll, sp.pitch) if tilt > 0 else 0.0
+        self._yaw_sp = wrap_pi(self._yaw_sp + sp.yaw_rate * dtp)
+        self._yaw_rate_ff = sp.yaw_rate
+        self._q_sp = quat_from_euler(sp.roll * scale, sp.pitch * scale, self._yaw_sp)
+        self._thrust_sp = throttle_to_thrust(sp.throttle, self.pos_ctl._hover_thrust, c.thrust_min, c.thrust_max)
+        self._ref = (NAN3, NAN3, NAN3)
 
 
 def _replace(cfg, **kw):

@@ -213,7 +213,7 @@ def test_px4_mode_encoding_matches_pymavlink():
         base, main, sub = mavutil.px4_map[name]
         assert mode_from_custom(main, sub) is mode
     with pytest.raises(UnsupportedMode):
-        mode_from_custom(1, 0)  # Manual is not flown
+        mode_from_custom(5, 0)  # Acro is not flown
 
 
 def test_parameter_store_checks_names_and_ranges():

@@ -359,3 +359,23 @@ def test_malformed_manual_control_is_rejected_with_statustext(make_vehicle):
     client.stop_stream()
     assert server.interface.manual_rejected > 0
     assert client.set_mode("POSCTL").result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # none was used
+
+
+def test_stabilized_mode_flies_on_the_throttle_and_position_mode_catches_it(make_vehicle):
+    server, client = make_vehicle(params=(("COM_RC_LOSS_T", 1.5),))
+    client.stream_sticks(z=0)
+    time.sleep(0.3)
+    assert client.set_mode("STABILIZED").result == mavlink.MAV_RESULT_ACCEPTED
+    assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "STABILIZED") is not None
+    assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink.MAV_RESULT_ACCEPTED
+    client.stream_sticks(z=650)  # above hover thrust: climbs, with nothing holding the altitude
+    assert client.recv("LOCAL_POSITION_NED", 10, lambda m: m.z < -1.5) is not None, "did not climb"
+    client.stream_sticks()       # centred sticks in Position mode hold where the vehicle stops
+    assert client.set_mode("POSCTL").result == mavlink.MAV_RESULT_ACCEPTED
+    assert client.recv("LOCAL_POSITION_NED", 10, lambda m: abs(m.vz) < 0.05 and abs(m.vx) < 0.05) is not None
+    z = server.sim.truth.position[2]
+    time.sleep(0.5)
+    assert abs(server.sim.truth.position[2] - z) < 0.1
+    assert client.command(mavlink.MAV_CMD_NAV_LAND).result == mavlink.MAV_RESULT_ACCEPTED
+    assert wait_until(lambda: not server.sim.armed, 30) and not server.sim.crashed
+    client.stop_stream()

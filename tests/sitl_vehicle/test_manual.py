@@ -178,3 +178,23 @@ def test_stick_modes_encode_like_px4():
         assert not mode.base_mode_flags & mavlink.MAV_MODE_FLAG_AUTO_ENABLED
     assert FlightMode.POSCTL.base_mode_flags & mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
     assert not FlightMode.AUTO_LOITER.base_mode_flags & mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+
+
+@pytest.mark.parametrize("mode", [FlightMode.STABILIZED, FlightMode.MANUAL])
+def test_stabilized_and_manual_sticks_set_the_attitude_and_the_throttle_the_thrust(commander, mode):
+    from sitl_vehicle.sim import AttitudeSetpoint
+
+    commander.manual_control(Sticks(throttle=0.5), 0.0)
+    assert commander.set_mode(mode, status()).accepted
+    reply = commander.arm(status())
+    assert not reply.accepted and "throttle not low" in reply.text
+    commander.manual_control(Sticks(throttle=0.0), 0.1)
+    assert commander.arm(status(0.1)).accepted
+    assert commander.update(status(0.2, armed=True)).setpoint == AttitudeSetpoint(throttle=0.0)  # idles
+    commander.manual_control(Sticks(pitch=1.0, roll=-1.0, yaw=1.0, throttle=0.7), 0.3)
+    sp = commander.update(flying(0.3)).setpoint
+    tilt = math.radians(35.0)
+    assert sp == AttitudeSetpoint(roll=-tilt, pitch=-tilt, yaw_rate=math.radians(150.0), throttle=0.7)
+    assert mode.base_mode_flags & mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+    assert not mode.base_mode_flags & mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+    assert mavutil.interpret_px4_mode(mode.base_mode_flags, mode.custom_mode) == mode.name

@@ -275,3 +275,36 @@ def test_reconfigure_position_rate_with_estimator_keeps_flying():
     assert sim._pos_div == 10 and sim.estimator.dt == pytest.approx(0.02)
     rec = _stream(sim, Setpoint(position=(1.0, 0.0, -1.0)), 3.0)
     assert abs(rec[-1, 0] - 1.0) < 0.05 and math.dist(sim.estimate.position, sim.truth.position) < 0.03
+
+
+def test_attitude_setpoints_fly_stabilized_and_position_control_takes_over_after():
+    """Stabilized flight: a centred throttle gives hover thrust, a nose-down pitch accelerates forward; a
+    position setpoint afterwards brings the vehicle to a stop where it is told."""
+    from sitl_vehicle.sim import AttitudeSetpoint, throttle_to_thrust
+
+    assert throttle_to_thrust(0.0, 0.4, 0.1, 1.0) == pytest.approx(0.1)
+    assert throttle_to_thrust(0.5, 0.4, 0.1, 1.0) == pytest.approx(0.4)
+    assert throttle_to_thrust(1.0, 0.4, 0.1, 1.0) == pytest.approx(1.0)
+    sim = VehicleSim(replace(VehicleConfig(), noise=None))
+    sim.set_armed(True)
+    sim.set_setpoint(AttitudeSetpoint(throttle=0.0))
+    sim.run(1.0)
+    assert sim.landed  # low throttle: stays on the ground
+    sim.set_setpoint(AttitudeSetpoint(throttle=0.6))
+    sim.run(1.0)
+    assert -sim.truth.position[2] > 0.3 and sim.truth.velocity[2] < -0.5    # above hover thrust: climbing
+    sim.set_setpoint(AttitudeSetpoint(throttle=0.5))
+    sim.run(0.3)
+    vz = sim.truth.velocity[2]
+    sim.run(1.0)
+    assert abs(sim.truth.velocity[2] - vz) < 0.5   # hover thrust balances gravity: only drag slows the climb
+    sim.set_setpoint(AttitudeSetpoint(pitch=-0.2, throttle=0.52))
+    sim.run(1.5)
+    assert sim.truth.velocity[0] > 1.0 and abs(sim.truth.position[1]) < 0.2   # forward (north), no drift east
+    roll, pitch, _ = sim.truth.euler()
+    assert pitch == pytest.approx(-0.2, abs=0.03) and abs(roll) < 0.03
+    target = (sim.truth.position[0] + 3.0, 0.0, -2.0)
+    sim.set_setpoint(Setpoint(position=target))
+    sim.run(8.0)
+    assert math.dist(sim.truth.position, target) < 0.05
+    assert math.hypot(*sim.truth.velocity) < 0.05 and not sim.crashed
