@@ -95,9 +95,9 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
             return mode
     if main_mode == MAIN_AUTO and sub_mode in (0, SUB_AUTO_READY):
         return FlightMode.AUTO_LOITER
-    names = {MAIN_ACRO: "Acro"}
-    name = names.get(main_mode)
-    what = f"{name} (main={main_mode} sub={sub_mode})" if name else f"main={main_mode} sub={sub_mode}"
+    what = f"main={main_mode} sub={sub_mode}"
+    if main_mode == MAIN_ACRO:
+        what = f"Acro ({what})"
     raise UnsupportedMode(f"PX4 mode {what} is not supported by this vehicle; it flies "
                           f"{', '.join(m.label for m in FlightMode)}")
 

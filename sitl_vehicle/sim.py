@@ -46,8 +46,7 @@ from sitl_vehicle.trajectory import PlannerConfig, TrapezoidPlanner, VelocitySle
 
 __all__ = [
     "AIRFRAMES", "Airframe", "AttitudeSetpoint", "ControlConfig", "PlannerConfig", "SensorNoise", "Setpoint",
-    "VehicleConfig",
-    "VehicleSim", "VehicleState", "CollisionWorld", "GroundOnly", "GRAVITY",
+    "VehicleConfig", "VehicleSim", "VehicleState", "CollisionWorld", "GroundOnly", "GRAVITY",
 ]
 
 NAN = float("nan")
