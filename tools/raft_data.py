@@ -18,9 +18,10 @@ in flight) and crops a random 160×120 window of both frames, which keeps a trai
 the two frames are first enlarged by a random factor (bicubic, through the same ``zoom_frame`` that
 :class:`~companion.flow.raft.backend.RaftBackend` enlarges frames with for ``input_scale``) and the flow is
 scaled with them, so that the network learns to run on enlarged camera frames, where its 1/8-resolution grid
-is finer relative to the camera's pixels.  A random crop of a zoomed frame mostly shows plain wall, whose flow
-is smooth; with ``crop_focus`` a share of the crops is moved to contain a pixel seen through the opening, so
-that the network learns the flow discontinuity at the opening's edge, which is what the gap detector reads.
+is finer relative to the camera's pixels.  About one random crop of a zoomed frame in three shows only wall,
+whose flow is smooth; with ``crop_focus`` a share of the crops is moved to contain a pixel seen through the
+opening, so that the network sees more of the flow discontinuity at the opening's edge, which is what the gap
+detector reads.
 
 Each item is a dict of tensors: ``image1``/``image2`` 3×H×W float32 RGB in 0..255, ``flow`` 2×H×W float32
 (forward flow 1 -> 2, pixels; 0 where not valid), ``valid`` H×W float32 (1 where the flow is exact and unoccluded).

@@ -440,7 +440,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="train on a random WIDTHxHEIGHT window of each rendered pair (none: whole frames)")
     d.add_argument("--crop-focus", dest="crop_focus", type=float, default=0.0, metavar="P",
                    help="probability that a crop is placed to contain the opening (the background seen through "
-                        "it) rather than anywhere: random crops of zoomed frames mostly show plain wall")
+                        "it) rather than anywhere (about a third of random crops of zoomed frames show only wall)")
     d.add_argument("--zoom", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
                    help="enlarge each rendered pair by a random factor in [LOW, HIGH] before cropping, so the "
                         "weights also fit the raft backend's input_scale (none: no zoom)")
