@@ -15,7 +15,15 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.manual import ShapedSticks, Sticks, StickShape, shape_sticks, stick_acceleration, stick_velocity
+from sitl_vehicle.manual import (
+    ShapedSticks,
+    Sticks,
+    StickShape,
+    shape_sticks,
+    stick_acceleration,
+    stick_climb_velocity,
+    stick_velocity,
+)
 from sitl_vehicle.mission import NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, MissionItem
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.params import ParameterStore
@@ -337,11 +345,10 @@ class Commander:
                 self._stick_yawing = False
                 self._hold_yaw = status.yaw
             yaw, yaw_rate = self._hold_yaw, NAN
-        vn, ve, vd = stick_velocity(sticks, shape, status.yaw)
         stop = None
         if sticks.up != 0.0:
             self._stick_hold_z = None
-            z = NAN
+            z, vd = NAN, stick_climb_velocity(sticks, shape)
         else:
             if self._stick_hold_z is None:
                 stop = _stopping_point(status.position, status.velocity)
@@ -353,6 +360,7 @@ class Commander:
                             yaw_rate=yaw_rate)
         if not sticks.horizontal_centred:
             self._stick_hold_xy = None
+            vn, ve = stick_velocity(sticks, shape, status.yaw)
             return Setpoint(position=(NAN, NAN, z), velocity=(vn, ve, vd), yaw=yaw, yaw_rate=yaw_rate)
         if self._stick_hold_xy is None:
             stop = stop or _stopping_point(status.position, status.velocity)
@@ -509,14 +517,10 @@ class Commander:
                 self._disarm("Disarmed: no takeoff after arming")
 
     def _offboard_lost(self, status: VehicleStatus) -> None:
-        self.failsafe = True
         action = int(self.params["COM_OBL_RC_ACT"])
         target = {OBL_ACTION_LAND: FlightMode.AUTO_LAND, OBL_ACTION_RETURN: FlightMode.AUTO_RTL}.get(
             action, FlightMode.AUTO_LOITER)
-        if target is FlightMode.AUTO_RTL and status.landed:
-            target = FlightMode.AUTO_LOITER
-        self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: offboard lost, switching to {target.label}")
-        self._enter(target, status)
+        self._fail_safe("offboard", target, status)
 
     def _manual_control_lost(self, status: VehicleStatus) -> None:
         """PX4's manual-control-loss failsafe, acted on (NAV_RCL_ACT) in the stick modes, which need it."""
@@ -524,16 +528,9 @@ class Commander:
         self._say(mavlink.MAV_SEVERITY_CRITICAL, "Manual control lost")
         if not (self.armed and self.mode.manual):
             return
-        self.failsafe = True
         action = int(self.params["NAV_RCL_ACT"])
-        if action in DLL_STOP_MOTORS:
-            self._disarm("Failsafe: manual control lost, motors stopped")
-            return
-        target = DLL_ACTIONS.get(action, FlightMode.AUTO_LOITER)
-        if target is FlightMode.AUTO_RTL and status.landed:
-            target = FlightMode.AUTO_LOITER
-        self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: manual control lost, switching to {target.label}")
-        self._enter(target, status)
+        self._fail_safe("manual control", None if action in DLL_STOP_MOTORS
+                        else DLL_ACTIONS.get(action, FlightMode.AUTO_LOITER), status)
 
     def _data_link_lost(self, status: VehicleStatus) -> None:
         """PX4's data-link-loss failsafe: only once a ground station had connected, only in the air."""
@@ -542,12 +539,18 @@ class Commander:
         action = int(self.params["NAV_DLL_ACT"])
         if not self.armed or status.landed or not (action in DLL_ACTIONS or action in DLL_STOP_MOTORS):
             return
+        self._fail_safe("data link", None if action in DLL_STOP_MOTORS else DLL_ACTIONS[action], status)
+
+    def _fail_safe(self, lost: str, target: FlightMode | None, status: VehicleStatus) -> None:
+        """Act on the loss of ``lost``: switch to ``target`` (Hold instead of Return on the ground), or stop
+        the motors when ``target`` is None."""
         self.failsafe = True
-        if action in DLL_STOP_MOTORS:
-            self._disarm("Failsafe: data link lost, motors stopped")
+        if target is None:
+            self._disarm(f"Failsafe: {lost} lost, motors stopped")
             return
-        target = DLL_ACTIONS[action]
-        self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: data link lost, switching to {target.label}")
+        if target is FlightMode.AUTO_RTL and status.landed:
+            target = FlightMode.AUTO_LOITER
+        self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {target.label}")
         self._enter(target, status)
 
     def _offboard_alive(self, now: float) -> bool:

@@ -2,7 +2,8 @@
 Stabilized and Manual.
 
 Pure functions: the MAVLink edge turns MANUAL_CONTROL into :class:`Sticks`, the commander turns sticks into
-velocity or acceleration setpoints with :func:`shape_sticks` and :func:`stick_velocity`. Conventions are
+velocity or acceleration setpoints with :func:`shape_sticks`, :func:`stick_velocity`, :func:`stick_climb_velocity`
+and :func:`stick_acceleration`. Conventions are
 PX4's ``manual_control_setpoint``: pitch stick forward +, roll stick right +, yaw stick right (clockwise
 seen from above) +, throttle 0..1 with 0.5 the centre, where Position and Altitude mode hold altitude.
 """
@@ -11,6 +12,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+from sitl_vehicle.airframes import GRAVITY
 
 INT16_MAX = 32767  # MANUAL_CONTROL: an axis sent as INT16_MAX is invalid (unused)
 
@@ -100,14 +103,19 @@ def heading_to_ned(forward: float, right: float, yaw: float) -> tuple[float, flo
     return c * forward - s * right, s * forward + c * right
 
 
-def stick_velocity(shaped: ShapedSticks, shape: StickShape, yaw: float) -> tuple[float, float, float]:
-    """Position mode: the NED velocity the sticks ask for (horizontal speed capped at vel_xy_max)."""
+def _horizontal(shaped: ShapedSticks, yaw: float, full_stick: float) -> tuple[float, float]:
+    """The horizontal sticks as a NED vector, ``full_stick`` long at full deflection (a diagonal full stick
+    is as long as a straight one)."""
     f, r = shaped.forward, shaped.right
     norm = math.hypot(f, r)
-    if norm > 1.0:  # a diagonal full stick flies at the same speed as a straight one
+    if norm > 1.0:
         f, r = f / norm, r / norm
-    vn, ve = heading_to_ned(f * shape.vel_xy_max, r * shape.vel_xy_max, yaw)
-    return vn, ve, stick_climb_velocity(shaped, shape)
+    return heading_to_ned(f * full_stick, r * full_stick, yaw)
+
+
+def stick_velocity(shaped: ShapedSticks, shape: StickShape, yaw: float) -> tuple[float, float]:
+    """Position mode: the horizontal NED velocity the sticks ask for (speed up to vel_xy_max)."""
+    return _horizontal(shaped, yaw, shape.vel_xy_max)
 
 
 def stick_climb_velocity(shaped: ShapedSticks, shape: StickShape) -> float:
@@ -118,9 +126,4 @@ def stick_climb_velocity(shaped: ShapedSticks, shape: StickShape) -> float:
 def stick_acceleration(shaped: ShapedSticks, shape: StickShape, yaw: float) -> tuple[float, float]:
     """Altitude mode: the horizontal NED acceleration of a tilt proportional to the sticks (no position or
     velocity hold: centred sticks level the vehicle and it drifts, as PX4's Altitude mode does)."""
-    f, r = shaped.forward, shaped.right
-    norm = math.hypot(f, r)
-    if norm > 1.0:
-        f, r = f / norm, r / norm
-    a = 9.80665 * math.tan(shape.tilt_max)
-    return heading_to_ned(f * a, r * a, yaw)
+    return _horizontal(shaped, yaw, GRAVITY * math.tan(shape.tilt_max))

@@ -286,10 +286,9 @@ class MavlinkVehicleInterface:
         self.schedules: dict[str, StreamSchedule] = {}
         self.setpoints_received = 0
         self.setpoints_rejected = 0
-        self._last_setpoint_warning = -math.inf
         self.manual_rejected = 0
+        self._last_warning: dict[str, float] = {}  # per kind of rejected message, when it was last reported
         self._upload: dict | None = None  # the mission upload under way: link, count, items so far
-        self._last_manual_warning = -math.inf
         self._boot_wall = time.time()
         self._statustext_id = 0
         self._after_ack: list = []  # messages a command asked for, sent right after its COMMAND_ACK
@@ -316,7 +315,7 @@ class MavlinkVehicleInterface:
         reached = self.commander.mission_reached
         while reached:  # as they happen, then the new current item
             self.broadcast(mavlink.MAVLink_mission_item_reached_message(reached.popleft()))
-            self.broadcast(self.build("MISSION_CURRENT", None))
+            self.broadcast(self._mission_current())
         telemetry = None
         for link in self.links:
             names = self.schedules[link.name].due(now)
@@ -328,7 +327,7 @@ class MavlinkVehicleInterface:
                 if msg is not None:
                     link.send(msg)
 
-    def build(self, name: str, t: Telemetry | None):
+    def build(self, name: str, t: Telemetry):
         """Encode one stream message from a telemetry snapshot (None if this vehicle cannot send it)."""
         if name == "MISSION_CURRENT":
             return self._mission_current()
@@ -512,10 +511,7 @@ class MavlinkVehicleInterface:
             setpoint = setpoint_from_message(msg, status.yaw)
         except SetpointError as exc:
             self.setpoints_rejected += 1
-            if status.time_s - self._last_setpoint_warning >= 1.0:  # one warning a second, not 50
-                self._last_setpoint_warning = status.time_s
-                log.warning("offboard setpoint rejected: %s", exc)
-                self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Setpoint rejected: {exc}", link)
+            self._report_rejected("Setpoint", exc, link, status.time_s)
             return
         self.setpoints_received += 1
         self.commander.offboard_setpoint(setpoint, status.time_s)
@@ -528,12 +524,17 @@ class MavlinkVehicleInterface:
             sticks = sticks_from_manual_control(msg.x, msg.y, msg.z, msg.r)
         except ManualControlError as exc:
             self.manual_rejected += 1
-            if status.time_s - self._last_manual_warning >= 1.0:  # one warning a second, not one per message
-                self._last_manual_warning = status.time_s
-                log.warning("manual control rejected: %s", exc)
-                self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Manual control rejected: {exc}", link)
+            self._report_rejected("Manual control", exc, link, status.time_s)
             return
         self.commander.manual_control(sticks, status.time_s)
+
+    def _report_rejected(self, kind: str, exc: Exception, link: UdpLink, now: float) -> None:
+        """Log and STATUSTEXT a rejected streamed message (``kind``: "Setpoint", ...), at most once a second
+        per kind: streams arrive at 20-50 Hz and one line a second names the problem."""
+        if now - self._last_warning.get(kind, -math.inf) >= 1.0:
+            self._last_warning[kind] = now
+            log.warning("%s rejected: %s", kind, exc)
+            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"{kind} rejected: {exc}", link)
 
     def _on_param_request_list(self, msg, link: UdpLink) -> None:
         if self._for_me(msg):
