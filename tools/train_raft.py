@@ -40,6 +40,8 @@ import torch
 from companion.flow.raft.backend import (
     DEFAULT_INPUT_SCALE,
     DEFAULT_MIRROR_AVERAGE,
+    DEFAULT_REFINE_ITERS,
+    DEFAULT_REFINE_SCALE,
     INPUT_SCALE_RANGE,
     estimate_flow,
 )
@@ -93,10 +95,12 @@ def _epe_sum(flow: np.ndarray, gt: np.ndarray, valid: np.ndarray) -> tuple[float
 
 @torch.no_grad()
 def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, device: torch.device,
-             with_dis: bool = False, input_scale: float = 1.0, mirror_average: bool = False) -> dict:
+             with_dis: bool = False, input_scale: float = 1.0, mirror_average: bool = False,
+             refine_scale: float | None = None, refine_iters: int = DEFAULT_REFINE_ITERS) -> dict:
     """Validation EPE (mean over all valid pixels of all pairs) of ``model``, optionally of DIS medium.
 
-    ``input_scale`` and ``mirror_average`` are the ``raft`` backend's inference options (``estimate_flow``).
+    ``input_scale``, ``mirror_average``, ``refine_scale`` and ``refine_iters`` are the ``raft`` backend's
+    inference options (``estimate_flow``).
     """
     was_training = model.training
     model.eval()
@@ -110,7 +114,8 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
     for i in range(len(dataset)):
         img1, img2, gt, valid = dataset.pair(i)
         flow, _ = estimate_flow(model, img1, img2, iters=iters, input_scale=input_scale, device=device,
-                                mirror_average=mirror_average)
+                                mirror_average=mirror_average, refine_scale=refine_scale,
+                                refine_iters=refine_iters)
         s, c = _epe_sum(flow, gt, valid)
         raft_sum += s
         count += c
@@ -120,10 +125,25 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
     model.train(was_training)
     result = {"pairs": len(dataset), "valid_pixels": count, "width": dataset.width, "height": dataset.height,
               "iters": iters, "input_scale": input_scale, "mirror_average": mirror_average,
+              "refine_scale": refine_scale or 0.0, "refine_iters": refine_iters if refine_scale else 0,
               "epe": raft_sum / count if count else float("nan")}
     if dis is not None:
         result["dis_medium_epe"] = dis_sum / count if count else float("nan")
     return result
+
+
+def inference_options(args: argparse.Namespace) -> dict:
+    """The raft backend's inference options that the command line sets, as :func:`evaluate` takes them."""
+    return {"input_scale": args.input_scale, "mirror_average": args.mirror_average,
+            "refine_scale": args.refine_scale or None, "refine_iters": args.refine_iters}
+
+
+def describe_inference(args: argparse.Namespace) -> str:
+    """'input scale 1, refined at scale 2 (4 iters)' and the like, for the one-line summaries."""
+    text = f"input scale {args.input_scale:g}"
+    if args.refine_scale:
+        text += f", refined at scale {args.refine_scale:g} ({args.refine_iters} iters)"
+    return text + (", mirror-averaged" if args.mirror_average else "")
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -332,8 +352,7 @@ def train(args: argparse.Namespace) -> dict:
         record = {"step": step, "loss": loss_value, "epe": epe, "lr": scheduler.get_last_lr()[0]}
         _log(log_path, record)
         if val is not None and args.val_every and step % args.val_every == 0 and step < stop:
-            last_val = evaluate(model, val, config["val_iters"], device, input_scale=args.input_scale,
-                                mirror_average=args.mirror_average)["epe"]
+            last_val = evaluate(model, val, config["val_iters"], device, **inference_options(args))["epe"]
             _log(log_path, {"step": step, "val_epe": last_val})
         if args.save_every and step % args.save_every == 0 and step < stop:
             save_checkpoint(out / f"checkpoint-{step:06d}.pth", model, optimizer, scheduler, step, config)
@@ -351,8 +370,7 @@ def train(args: argparse.Namespace) -> dict:
     summary = {"weights": str(final), "step": step, "steps_run": steps_run,
                "seconds_per_step": elapsed / steps_run if steps_run else None}
     if val is not None:
-        result = evaluate(model, val, config["val_iters"], device, with_dis=True, input_scale=args.input_scale,
-                          mirror_average=args.mirror_average)
+        result = evaluate(model, val, config["val_iters"], device, with_dis=True, **inference_options(args))
         _log(log_path, {"step": step, "val_epe": result["epe"], "dis_medium_epe": result["dis_medium_epe"]})
         summary["validation"] = result
         (out / "eval.json").write_text(json.dumps({"weights": str(final), **result}, indent=2) + "\n")
@@ -373,8 +391,7 @@ def eval_only(args: argparse.Namespace) -> dict:
     model.to(device).eval()
     size = args.val_size or DEFAULT_VALIDATION_SIZE
     pairs = validation_set(size, args.width, args.height, seed=args.val_seed)
-    result = evaluate(model, pairs, args.val_iters, device, with_dis=True, input_scale=args.input_scale,
-                      mirror_average=args.mirror_average)
+    result = evaluate(model, pairs, args.val_iters, device, with_dis=True, **inference_options(args))
     result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, "upsample": upsample,
               "seed": args.val_seed, **result}
     out = Path(args.out)
@@ -383,7 +400,7 @@ def eval_only(args: argparse.Namespace) -> dict:
     which = "validation" if args.val_seed == VALIDATION_SEED else f"seed-{args.val_seed}"
     print(f"EPE raft-{variant} {result['epe']:.3f} px, dis:medium {result['dis_medium_epe']:.3f} px "
           f"({result['pairs']} {which} pairs, {args.width}x{args.height}, {args.val_iters} iters, "
-          f"input scale {args.input_scale:g}{', mirror-averaged' if args.mirror_average else ''}) "
+          f"{describe_inference(args)}) "
           f"-> {out / 'eval.json'}")
     return result
 
@@ -463,6 +480,11 @@ def build_parser() -> argparse.ArgumentParser:
                    default=DEFAULT_MIRROR_AVERAGE,
                    help="also run each validation pair mirrored left-right and average the flows, as the raft "
                         "backend's mirror_average does")
+    v.add_argument("--refine-scale", dest="refine_scale", type=float, default=DEFAULT_REFINE_SCALE, metavar="S",
+                   help="after the pass at --input-scale, refine on frames enlarged by S, started from that "
+                        "pass's flow, as the raft backend's refine_scale does (0: one pass)")
+    v.add_argument("--refine-iters", dest="refine_iters", type=int, default=DEFAULT_REFINE_ITERS, metavar="N",
+                   help="RAFT iterations of the refinement pass")
     v.add_argument("--val-every", dest="val_every", type=int, default=200,
                    help="validate every N steps (0: only at the end)")
     o = p.add_argument_group("output and runtime")
@@ -506,6 +528,11 @@ def _check(args: argparse.Namespace) -> None:
     lo, hi = INPUT_SCALE_RANGE
     if not (math.isfinite(args.input_scale) and lo <= args.input_scale <= hi):
         raise CliError(f"--input-scale must be within {lo:g}..{hi:g} (got {args.input_scale})")
+    if args.refine_scale != 0 and not (math.isfinite(args.refine_scale) and lo <= args.refine_scale <= hi):
+        raise CliError(f"--refine-scale must be 0 (one pass) or within {lo:g}..{hi:g} (got {args.refine_scale})")
+    if args.refine_iters < 1:
+        raise CliError(f"--refine-iters must be at least 1 (got {args.refine_iters}); use --refine-scale 0 "
+                       "for one pass")
     if not 0.0 <= args.crop_focus <= 1.0:
         raise CliError(f"--crop-focus must be a probability in [0, 1] (got {args.crop_focus})")
     if args.crop_focus > 0 and crop is None and not args.eval_only:

@@ -54,8 +54,9 @@ def parse_backend(spec: str) -> tuple[str, dict]:
     """A backend spec -> (name, options).
 
     'dis:fast' -> ('dis', {'preset': 'fast'}); 'raft' -> ('raft', {}); 'raft:large' -> a variant;
-    'raft:scale=1.5', 'raft:small,iters=20,mirror=1' -> RAFT options (``scale`` is the backend's
-    ``input_scale``, ``mirror`` its ``mirror_average``, 0 or 1).
+    'raft:scale=1.5', 'raft:small,iters=20,mirror=1', 'raft:refine=0' -> RAFT options (``scale`` is the
+    backend's ``input_scale``, ``mirror`` its ``mirror_average``, 0 or 1, ``refine`` its ``refine_scale``,
+    0 for one pass, ``refine_iters`` its ``refine_iters``).
     """
     name, _, arg = spec.partition(":")
     if not arg:
@@ -64,8 +65,7 @@ def parse_backend(spec: str) -> tuple[str, dict]:
         return name, {"preset": arg}
     if name == "raft":
         return name, _raft_options(spec, arg)
-    raise ValueError(f"backend {spec!r}: only dis:<preset> and raft:<variant>,scale=<s>,iters=<n>,mirror=<0|1> "
-                     "take an argument")
+    raise ValueError(f"backend {spec!r}: only dis:<preset> and raft:<variant>,{_RAFT_USAGE} take an argument")
 
 
 def _zero_or_one(text: str) -> bool:
@@ -76,7 +76,10 @@ def _zero_or_one(text: str) -> bool:
 
 # spec key -> (backend option, parser, what the value must be)
 _RAFT_KEYS = {"scale": ("input_scale", float, "a number"), "iters": ("iters", int, "a number"),
-              "mirror": ("mirror_average", _zero_or_one, "0 or 1")}
+              "mirror": ("mirror_average", _zero_or_one, "0 or 1"),
+              "refine": ("refine_scale", float, "a number (0: one pass)"),
+              "refine_iters": ("refine_iters", int, "a number")}
+_RAFT_USAGE = "scale=<s>,iters=<n>,mirror=<0|1>,refine=<s|0>,refine_iters=<n>"
 
 
 def _raft_options(spec: str, arg: str) -> dict:
@@ -87,8 +90,7 @@ def _raft_options(spec: str, arg: str) -> dict:
             options["variant"] = key
             continue
         if key not in _RAFT_KEYS:
-            raise ValueError(f"backend {spec!r}: unknown RAFT option {key!r} (use scale=<s>, iters=<n> or "
-                             "mirror=<0|1>)")
+            raise ValueError(f"backend {spec!r}: unknown RAFT option {key!r} (use {_RAFT_USAGE})")
         option, kind, what = _RAFT_KEYS[key]
         try:
             options[option] = kind(value)

@@ -55,6 +55,8 @@ def test_registry_rejects_unknown_and_bad_inputs():
     ("raft:small,iters=20,scale=2", ("raft", {"variant": "small", "iters": 20, "input_scale": 2.0})),
     ("raft:mirror=1", ("raft", {"mirror_average": True})),
     ("raft:scale=1.5,mirror=0", ("raft", {"input_scale": 1.5, "mirror_average": False})),
+    ("raft:refine=0", ("raft", {"refine_scale": 0.0})),
+    ("raft:refine=1.5,refine_iters=6", ("raft", {"refine_scale": 1.5, "refine_iters": 6})),
 ])
 def test_backend_specs_parse_to_options(spec, expected):
     from companion.flow.registry import parse_backend
@@ -66,6 +68,8 @@ def test_backend_specs_parse_to_options(spec, expected):
     ("raft:zoom=2", "unknown RAFT option 'zoom'"),
     ("raft:scale=big", "scale must be a number"),
     ("raft:mirror=yes", "mirror must be 0 or 1"),
+    ("raft:refine=x", "refine must be a number"),
+    ("raft:refine_iters=1.5", "refine_iters must be a number"),
     ("farneback:x", "only dis:<preset>"),
 ])
 def test_bad_backend_specs_are_one_line_errors(spec, needle):

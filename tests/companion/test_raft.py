@@ -8,6 +8,12 @@ import torch
 
 from companion.flow import FlowWeightsError, make_flow_backend
 from companion.flow.raft import RAFT, InputPadder, RaftConfig
+from companion.flow.raft.backend import (
+    DEFAULT_INPUT_SCALE,
+    DEFAULT_MIRROR_AVERAGE,
+    DEFAULT_REFINE_ITERS,
+    DEFAULT_REFINE_SCALE,
+)
 from companion.flow.raft.corr import CorrBlock
 from companion.flow.raft.upsample import convex_upsample, upflow8
 from companion.flow.raft.weights import clear_cache, load_raft_state_dict, save_flowgap_weights
@@ -257,14 +263,46 @@ def test_input_scale_zooms_frames_and_returns_flow_in_frame_pixels(scale):
 
 def test_mirror_average_is_the_mean_of_the_pair_and_its_mirror_image():
     img1, img2 = textured_pair(72, 88, (2.0, 1.0))
-    plain = make_flow_backend("raft", random_init_seed=4, iters=2)
-    averaged = make_flow_backend("raft", random_init_seed=4, iters=2, mirror_average=True)
+    plain = make_flow_backend("raft", random_init_seed=4, iters=2, refine_scale=0)
+    averaged = make_flow_backend("raft", random_init_seed=4, iters=2, mirror_average=True, refine_scale=0)
     a = plain.estimate(img1, img2)
     m = plain.estimate(img1[:, ::-1].copy(), img2[:, ::-1].copy())[:, ::-1] * np.float32([-1, 1])
     assert not np.allclose(a, m, atol=1e-3)            # random weights: the two estimates differ
     np.testing.assert_allclose(averaged.estimate(img1, img2), 0.5 * (a + m), atol=2e-4)
     # the initial flow is mirrored there and back
     assert_silenced_flow_head_returns_init(averaged, img1, img2, (1.5, -0.5))
+
+
+def test_refinement_pass_is_a_second_pass_on_enlarged_frames_started_from_the_first():
+    img1, img2 = textured_pair(72, 88, (2.0, 1.0))
+    refined = make_flow_backend("raft", random_init_seed=5, iters=2, input_scale=1.0, refine_scale=1.5,
+                                refine_iters=3)
+    first = make_flow_backend("raft", random_init_seed=5, iters=2, input_scale=1.0, refine_scale=0)
+    second = make_flow_backend("raft", random_init_seed=5, iters=3, input_scale=1.5, refine_scale=0)
+    coarse = first.estimate(img1, img2)
+    expected = second.estimate(img1, img2, flow_init=coarse)
+    np.testing.assert_array_equal(refined.estimate(img1, img2), expected)
+    assert not np.allclose(expected, coarse, atol=1e-3)
+    # refine_scale 0 and None are the same single pass
+    single = make_flow_backend("raft", random_init_seed=5, iters=2, input_scale=1.0, refine_scale=None)
+    np.testing.assert_array_equal(single.estimate(img1, img2), coarse)
+    # a caller's initial flow starts the first pass; with the flow head silenced both passes carry it through
+    assert_silenced_flow_head_returns_init(refined, img1, img2, (1.5, -0.5))
+
+
+def test_the_default_settings_are_the_shipped_weights_own():
+    backend = make_flow_backend("raft", random_init_seed=1)
+    assert (backend.input_scale, backend.refine_scale, backend.refine_iters, backend.mirror_average) == \
+        (DEFAULT_INPUT_SCALE, DEFAULT_REFINE_SCALE, DEFAULT_REFINE_ITERS, DEFAULT_MIRROR_AVERAGE)
+
+
+@pytest.mark.parametrize("options, needle", [
+    ({"refine_scale": float("nan")}, "refine_scale must be 0"), ({"refine_scale": 8.0}, "refine_scale must be 0"),
+    ({"refine_scale": -1.0}, "refine_scale must be 0"), ({"refine_iters": 0}, "refine_iters must be >= 1"),
+])
+def test_bad_refinement_settings_are_refused(options, needle):
+    with pytest.raises(ValueError, match=needle):
+        make_flow_backend("raft", random_init_seed=1, **options)
 
 
 def test_frames_too_small_after_zooming_name_the_input_scale():
@@ -419,7 +457,8 @@ def contraction_weights(backend, alpha: float = 0.5, target=(1.5, -0.75), eps: f
 
 def test_warm_start_converges_to_cold_result_with_enough_iterations():
     img1, img2 = textured_pair(64, 64, (1.0, 0.5))
-    backend = make_flow_backend("raft", random_init_seed=6, input_scale=1.0)   # the hand-set update works in pixels
+    # the hand-set update works in the frames' pixels: one pass on the frames as they are
+    backend = make_flow_backend("raft", random_init_seed=6, input_scale=1.0, refine_scale=0)
     contraction_weights(backend)
     init = np.zeros((64, 64, 2), np.float32)
     init[..., 0], init[..., 1] = -3.0, 2.0

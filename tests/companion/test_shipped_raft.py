@@ -7,7 +7,13 @@ import pytest
 import torch
 
 from companion.flow import make_flow_backend
-from companion.flow.raft.backend import DEFAULT_INPUT_SCALE, DEFAULT_MIRROR_AVERAGE, DEFAULT_WEIGHTS
+from companion.flow.raft.backend import (
+    DEFAULT_INPUT_SCALE,
+    DEFAULT_MIRROR_AVERAGE,
+    DEFAULT_REFINE_ITERS,
+    DEFAULT_REFINE_SCALE,
+    DEFAULT_WEIGHTS,
+)
 from tests.companion.synthetic import textured_pair
 from tools import train_raft
 
@@ -37,7 +43,8 @@ def test_model_card_epe_is_reproduced(tmp_path):
     argv = ["--eval-only", str(DEFAULT_WEIGHTS), "--out", str(tmp_path), "--threads", "2",
             "--val-size", str(val["pairs"]), "--width", str(val["width"]), "--height", str(val["height"]),
             "--val-iters", str(val["iters"]), "--input-scale", str(val.get("input_scale", 1.0)),
-            "--mirror-average" if val.get("mirror_average") else "--no-mirror-average"]
+            "--mirror-average" if val.get("mirror_average") else "--no-mirror-average",
+            "--refine-scale", str(val.get("refine_scale", 0)), "--refine-iters", str(val.get("refine_iters") or 1)]
     assert train_raft.main(argv) == 0
     result = json.loads((tmp_path / "eval.json").read_text())
     assert result["pairs"] == val["pairs"] and result["valid_pixels"] == val["valid_pixels"]
@@ -49,3 +56,5 @@ def test_model_card_epe_is_reproduced(tmp_path):
     # the card's number is for the settings the backend runs the weights with by default
     assert val["input_scale"] == DEFAULT_INPUT_SCALE and f"input scale {DEFAULT_INPUT_SCALE:g}" in card
     assert val.get("mirror_average", False) == DEFAULT_MIRROR_AVERAGE
+    assert (val["refine_scale"], val["refine_iters"]) == (DEFAULT_REFINE_SCALE, DEFAULT_REFINE_ITERS)
+    assert f"refined at input scale {DEFAULT_REFINE_SCALE:g} ({DEFAULT_REFINE_ITERS} iterations)" in card

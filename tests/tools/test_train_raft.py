@@ -318,7 +318,16 @@ def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     assert math.isfinite(result["epe"]) and result["epe"] >= 0
     assert math.isfinite(result["dis_medium_epe"]) and result["dis_medium_epe"] >= 0
     assert f"{result['epe']:.3f}" in out
-    assert result["input_scale"] == train_raft.DEFAULT_INPUT_SCALE          # the raft backend's default
+    assert result["input_scale"] == train_raft.DEFAULT_INPUT_SCALE          # the raft backend's defaults
+    assert result["refine_scale"] == train_raft.DEFAULT_REFINE_SCALE
+    assert result["refine_iters"] == train_raft.DEFAULT_REFINE_ITERS
+    assert f"refined at scale {train_raft.DEFAULT_REFINE_SCALE:g}" in out
+    rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
+                          "--height", "64", "--val-size", "2", "--val-iters", "2", "--refine-scale", "0",
+                          "--out", str(tmp_path / "one-pass")])
+    assert rc == 0 and "refined" not in capsys.readouterr().out
+    one_pass = json.loads((tmp_path / "one-pass" / "eval.json").read_text())
+    assert one_pass["refine_scale"] == 0 and one_pass["refine_iters"] == 0 and one_pass["epe"] != result["epe"]
     rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
                           "--height", "64", "--val-size", "2", "--val-iters", "2", "--input-scale", "1.5",
                           "--out", str(tmp_path / "zoomed")])
@@ -358,6 +367,8 @@ def test_missing_weights_file_is_a_one_line_error_exit_2(tmp_path):
     (["--zoom", "0.5", "2"], "--zoom must be 1 <= LOW <= HIGH"),
     (["--zoom", "1", "2", "--crop", "none"], "--zoom needs a --crop"),
     (["--input-scale", "0"], "--input-scale must be within"),
+    (["--refine-scale", "9"], "--refine-scale must be 0 (one pass) or within"),
+    (["--refine-iters", "0"], "--refine-iters must be at least 1"),
     (["--crop-focus", "nan"], "--crop-focus must be a probability"),
     (["--crop-focus", "0.5", "--crop", "none"], "--crop-focus needs a --crop"),
 ])

@@ -21,9 +21,13 @@ DEFAULT_WEIGHTS = WEIGHTS_DIR / "raft-small-flowgap.pth"
 # The 4-level correlation pyramid halves the 1/8-resolution feature map three times, so a frame (after
 # padding to multiples of 8) must be at least 8 × 8 = 64 pixels on each side.
 MIN_SIDE = 64
-# The shipped weights' input scale (MODEL_CARD.md): frames are enlarged by this factor before RAFT runs, so
-# its 1/8-resolution grid is finer relative to the camera's pixels, and the flow is shrunk back.
-DEFAULT_INPUT_SCALE = 1.25
+# The shipped weights' inference settings (MODEL_CARD.md says how they were chosen): a first pass on the frames
+# as they are, then a refinement pass on frames enlarged by DEFAULT_REFINE_SCALE, started from the first
+# pass's flow, so that RAFT's 1/8-resolution grid is finer relative to the camera's pixels (the flow is shrunk
+# back).  On enlarged frames alone, RAFT fails on the largest motions; started from the first pass it does not.
+DEFAULT_INPUT_SCALE = 1.0
+DEFAULT_REFINE_SCALE = 2.0
+DEFAULT_REFINE_ITERS = 4
 # Whether the backend also runs the mirrored pair and averages (MODEL_CARD.md says why it is the default or not).
 DEFAULT_MIRROR_AVERAGE = False
 INPUT_SCALE_RANGE = (0.25, 4.0)  # accepted input_scale values (smaller frames, or 16× the compute)
@@ -77,7 +81,10 @@ class RaftBackend:
     (enlarge both frames by this factor before RAFT and shrink the flow back: finer flow for about
     ``input_scale**2`` times the compute; the default is the shipped weights' own, :data:`DEFAULT_INPUT_SCALE`),
     ``mirror_average`` (also run the left-right mirrored pair, in the same batch, and average the two
-    flows: their errors are partly independent; about twice the compute).
+    flows: their errors are partly independent; about twice the compute), ``refine_scale`` (after the pass at
+    ``input_scale``, run a second pass on frames enlarged by this factor, started from the first pass's flow;
+    None or 0: one pass) with ``refine_iters`` iterations.  The defaults are the shipped weights' own:
+    :data:`DEFAULT_INPUT_SCALE`, :data:`DEFAULT_REFINE_SCALE`, :data:`DEFAULT_REFINE_ITERS`.
     """
 
     name = "raft"
@@ -86,15 +93,24 @@ class RaftBackend:
                  warm_start: bool = False, device: str = "cpu", num_threads: int | None = None,
                  random_init_seed: int | None = None, padding_mode: str = "sintel",
                  input_scale: float = DEFAULT_INPUT_SCALE,
-                 mirror_average: bool = DEFAULT_MIRROR_AVERAGE) -> None:
+                 mirror_average: bool = DEFAULT_MIRROR_AVERAGE,
+                 refine_scale: float | None = DEFAULT_REFINE_SCALE,
+                 refine_iters: int = DEFAULT_REFINE_ITERS) -> None:
         if num_threads is not None:
             torch.set_num_threads(int(num_threads))
         if iters < 0:
             raise ValueError("iters must be >= 0")
+        if refine_iters < 1:
+            raise ValueError(f"refine_iters must be >= 1 (got {refine_iters}); set refine_scale to 0 for one pass")
         lo, hi = INPUT_SCALE_RANGE
         if not (np.isfinite(input_scale) and lo <= input_scale <= hi):
             raise ValueError(f"input_scale must be within {lo:g}..{hi:g} (got {input_scale})")
+        if refine_scale is not None and refine_scale != 0 and not (np.isfinite(refine_scale)
+                                                                   and lo <= refine_scale <= hi):
+            raise ValueError(f"refine_scale must be 0 (one pass) or within {lo:g}..{hi:g} (got {refine_scale})")
         self.input_scale = float(input_scale)
+        self.refine_scale = float(refine_scale) if refine_scale else None
+        self.refine_iters = int(refine_iters)
         self.mirror_average = bool(mirror_average)
         self.iters = int(iters)
         self.warm_start = bool(warm_start)
@@ -148,7 +164,8 @@ class RaftBackend:
         flow, low = estimate_flow(self.model, img1, img2, iters=self.iters if iters is None else int(iters),
                                   input_scale=self.input_scale, flow_init=init, previous_low=previous,
                                   padding_mode=self.padding_mode, device=self._device,
-                                  mirror_average=self.mirror_average)
+                                  mirror_average=self.mirror_average, refine_scale=self.refine_scale,
+                                  refine_iters=self.refine_iters)
         if self.warm_start:
             self._previous_low = low
         return flow
@@ -157,8 +174,26 @@ class RaftBackend:
 def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float = 1.0,
                   flow_init: np.ndarray | None = None, previous_low: torch.Tensor | None = None,
                   padding_mode: str = "sintel", device: torch.device | str = "cpu",
-                  mirror_average: bool = False) -> tuple[np.ndarray, torch.Tensor]:
-    """(H×W×2 float32 flow, 1/8-resolution flow) of ``model`` for one pair of H×W×3 frames.
+                  mirror_average: bool = False, refine_scale: float | None = None,
+                  refine_iters: int = DEFAULT_REFINE_ITERS) -> tuple[np.ndarray, torch.Tensor]:
+    """(H×W×2 float32 flow, 1/8-resolution flow of the first pass) of ``model`` for one pair of H×W×3 frames.
+
+    With ``refine_scale``, the first pass's flow starts a second pass of ``refine_iters`` iterations on the
+    frames enlarged by ``refine_scale``, whose flow is returned (the 1/8-resolution flow returned stays the
+    first pass's, on the grid that ``previous_low`` is matched against).
+    """
+    flow, low = _one_pass(model, img1, img2, iters, input_scale, flow_init, previous_low, padding_mode, device,
+                          mirror_average)
+    if refine_scale:
+        flow, _ = _one_pass(model, img1, img2, refine_iters, refine_scale, flow, None, padding_mode, device,
+                            mirror_average)
+    return flow, low
+
+
+def _one_pass(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float,
+              flow_init: np.ndarray | None, previous_low: torch.Tensor | None, padding_mode: str,
+              device: torch.device | str, mirror_average: bool) -> tuple[np.ndarray, torch.Tensor]:
+    """One RAFT pass: (H×W×2 float32 flow, 1/8-resolution flow).
 
     The frames are enlarged by ``input_scale`` (when not 1) and padded to multiples of 8; the flow is
     unpadded, shrunk back and rescaled to the frames' pixels.  ``flow_init`` is a full-resolution initial
