@@ -662,10 +662,11 @@ class MavlinkVehicleInterface:
         if not 0 <= msg.seq < len(mission):
             self._mission_ack(link, msg, mavlink.MAV_MISSION_INVALID_SEQUENCE)
             return
+        # the float MISSION_REQUEST is answered in its own form, MISSION_ITEM, as the mission protocol says
         link.send(mission[msg.seq].to_message(msg.seq == self.commander.mission_seq, msg.get_srcSystem(),
-                                              msg.get_srcComponent()))
+                                              msg.get_srcComponent(), int_form=msg.get_type() != "MISSION_REQUEST"))
 
-    _on_mission_request = _on_mission_request_int  # answered with MISSION_ITEM_INT, as PX4 does
+    _on_mission_request = _on_mission_request_int
 
     def _on_mission_clear_all(self, msg, link: UdpLink) -> None:
         if not self._for_me(msg):

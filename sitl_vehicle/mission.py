@@ -24,6 +24,8 @@ SUPPORTED_COMMANDS = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_RETURN_TO_LAUNCH: "NAV_R
 # frames: altitude relative to home, or above mean sea level
 RELATIVE_FRAMES = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 AMSL_FRAMES = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
+FLOAT_FRAMES = {mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                mavlink.MAV_FRAME_GLOBAL_INT: mavlink.MAV_FRAME_GLOBAL}
 MAX_ITEMS = 500
 MAX_DISTANCE_M = 10_000.0  # a waypoint farther than this from the local origin is a mistake (e.g. lat/lon 0)
 
@@ -79,10 +81,17 @@ class MissionItem:
         """The item's local NED down coordinate, given home's."""
         return home_down - self.alt if self.alt_relative else self.amsl_down
 
-    def to_message(self, current: bool, target_system: int, target_component: int):
-        return mavlink.MAVLink_mission_item_int_message(
-            target_system, target_component, self.seq, self.frame, self.command, int(current), int(self.autocontinue),
-            *self.params, int(round(self.lat * 1e7)), int(round(self.lon * 1e7)), self.alt,
+    def to_message(self, current: bool, target_system: int, target_component: int, int_form: bool = True):
+        """MISSION_ITEM_INT (lat/lon in 1e-7 degrees), or with ``int_form`` false the older float MISSION_ITEM
+        (degrees, and the frame's non-_INT name), as the MAVLink mission protocol answers MISSION_REQUEST."""
+        if int_form:
+            return mavlink.MAVLink_mission_item_int_message(
+                target_system, target_component, self.seq, self.frame, self.command, int(current),
+                int(self.autocontinue), *self.params, int(round(self.lat * 1e7)), int(round(self.lon * 1e7)),
+                self.alt, mavlink.MAV_MISSION_TYPE_MISSION)
+        return mavlink.MAVLink_mission_item_message(
+            target_system, target_component, self.seq, FLOAT_FRAMES.get(self.frame, self.frame), self.command,
+            int(current), int(self.autocontinue), *self.params, self.lat, self.lon, self.alt,
             mavlink.MAV_MISSION_TYPE_MISSION)
 
 

@@ -124,6 +124,12 @@ def test_mission_upload_download_fly_and_land_over_mavlink(make_vehicle):
         client.conn.mav.mission_request_int_send(1, 1, 2, mavlink.MAV_MISSION_TYPE_MISSION)
     down = client.recv("MISSION_ITEM_INT", 3)
     assert (down.seq, down.command, down.x, down.y, down.z) == (2, NAV_WAYPOINT, mission[2].x, mission[2].y, 2.0)
+    with client.lock:       # the older float request gets the float item: degrees, and the non-_INT frame name
+        client.conn.mav.mission_request_send(1, 1, 2, mavlink.MAV_MISSION_TYPE_MISSION)
+    legacy = client.recv("MISSION_ITEM", 3)
+    assert (legacy.seq, legacy.command, legacy.frame) == (2, NAV_WAYPOINT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT)
+    degrees = (mission[2].x * 1e-7, mission[2].y * 1e-7, 2.0)
+    assert (legacy.x, legacy.y, legacy.z) == pytest.approx(degrees, abs=1e-5)          # float32 degrees
     assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink.MAV_RESULT_ACCEPTED
     assert client.command(mavlink.MAV_CMD_MISSION_START, 0, 3).result == mavlink.MAV_RESULT_ACCEPTED
     assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "MISSION") is not None
