@@ -21,7 +21,7 @@ from scenes.spec import SceneSpec
 from scenes.splats import LABEL_BACKGROUND, GaussianCloud
 
 __all__ = ["gap_mask", "gap_mask_from_labels", "flow_between", "flow_from_depth", "warp_backward",
-           "sample_pose_pair", "load_collision", "SceneCollision"]
+           "sample_pose_pair", "DEFAULT_PAIR_DISTANCE", "load_collision", "SceneCollision"]
 
 
 def gap_mask_from_labels(label: np.ndarray) -> np.ndarray:
@@ -89,16 +89,24 @@ def warp_backward(image2: np.ndarray, flow: np.ndarray) -> np.ndarray:
                      borderMode=cv2.BORDER_REPLICATE)
 
 
+DEFAULT_PAIR_DISTANCE = (0.6, 2.6)  # m before the wall's front face: the first pose of a training pair
+
+
 def sample_pose_pair(spec: SceneSpec, rng: np.random.Generator, max_step: float = 0.15,
-                     max_turn_rad: float = 0.05) -> tuple[Pose, Pose]:
+                     max_turn_rad: float = 0.05,
+                     distance: tuple[float, float] = DEFAULT_PAIR_DISTANCE) -> tuple[Pose, Pose]:
     """Two nearby NED body poses in front of the wall, roughly facing its opening (for flow training).
 
-    The first pose is 0.6 m to 2.6 m before the wall's front face, within about a metre of the opening's
-    centre; the second is displaced by up to ``max_step`` metres per axis and rotated by up to
-    ``max_turn_rad`` per axis. All draws come from ``rng``."""
+    The first pose is ``distance`` (low, high) metres before the wall's front face (never more than 0.5 m
+    behind the start x = 0), within about a metre of the opening's centre; the second is displaced by up to
+    ``max_step`` metres per axis and rotated by up to ``max_turn_rad`` per axis. All draws come from
+    ``rng``."""
+    near, far = (float(v) for v in distance)
+    if not (0.0 < near <= far and np.isfinite(far)):
+        raise ValueError(f"distance must be a range 0 < low <= high in metres (got {distance})")
     poly = np.array(spec.openings[0].polygon()) if spec.openings else np.array([[0.0, -1.5]])
     cy, cz = poly.mean(0)
-    x = spec.wall_x - rng.uniform(0.6, min(2.6, spec.wall_x + 0.5))
+    x = spec.wall_x - rng.uniform(near, max(near, min(far, spec.wall_x + 0.5)))
     y = cy + rng.uniform(-1.0, 1.0)
     z = float(np.clip(cz + rng.uniform(-0.5, 0.5), -3.0, -0.5))
     yaw = np.arctan2(cy - y, spec.wall_x - x) * rng.uniform(0.3, 1.0)

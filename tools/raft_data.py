@@ -21,7 +21,9 @@ scaled with them, so that the network learns to run on enlarged camera frames, w
 is finer relative to the camera's pixels.  About one random crop of a zoomed frame in three shows only wall,
 whose flow is smooth; with ``crop_focus`` a share of the crops is moved to contain a pixel seen through the
 opening, so that the network sees more of the flow discontinuity at the opening's edge, which is what the gap
-detector reads.
+detector reads.  ``distance`` widens the range of distances the first camera stands from the wall: flights
+start 3 m before it (up to 4 m in random scenes), where a forward step's flow near the focus of expansion is
+a pixel or two.
 
 Each item is a dict of tensors: ``image1``/``image2`` 3×H×W float32 RGB in 0..255, ``flow`` 2×H×W float32
 (forward flow 1 -> 2, pixels; 0 where not valid), ``valid`` H×W float32 (1 where the flow is exact and unoccluded).
@@ -57,14 +59,16 @@ class RenderedFlowDataset(Dataset):
     frames are enlarged by (uniform; the flow is scaled with them), ``crop`` an optional (width, height)
     window cut at a random place from both (zoomed) frames (items are then crop-sized), ``crop_focus`` the
     probability that the window is instead placed to contain a random pixel of the background seen through
-    the opening (:func:`opening_pixels`; a frame that shows none keeps its random window).
+    the opening (:func:`opening_pixels`; a frame that shows none keeps its random window), ``distance`` an
+    optional (low, high) range in metres of the first pose's distance before the wall (default
+    ``scenes.groundtruth.DEFAULT_PAIR_DISTANCE``, 0.6–2.6 m).
     """
 
     def __init__(self, seed: int = 0, length: int = 100_000, width: int = DEFAULT_WIDTH,
                  height: int = DEFAULT_HEIGHT, pairs_per_scene: int = 8, exposure_jitter: float = 0.0,
                  max_step: float = 0.15, max_turn_rad: float = 0.05, scene_cache: int = 4,
                  crop: tuple[int, int] | None = None, zoom: tuple[float, float] | None = None,
-                 crop_focus: float = 0.0) -> None:
+                 crop_focus: float = 0.0, distance: tuple[float, float] | None = None) -> None:
         if width <= 0 or height <= 0 or width % 8 or height % 8:
             raise ValueError(f"image size must be positive multiples of 8 (got {width}x{height})")
         if crop is not None:
@@ -83,6 +87,11 @@ class RenderedFlowDataset(Dataset):
             raise ValueError(f"crop_focus must be a probability in [0, 1] (got {crop_focus})")
         if crop_focus > 0 and crop is None:
             raise ValueError("crop_focus needs a crop (it chooses where the crop window goes)")
+        if distance is not None:
+            near, far = (float(v) for v in distance)
+            if not (0.0 < near <= far and np.isfinite(far)):
+                raise ValueError(f"distance must be a range 0 < low <= high in metres (got {distance})")
+            distance = (near, far)
         if length <= 0:
             raise ValueError("length must be positive")
         if pairs_per_scene <= 0:
@@ -100,6 +109,7 @@ class RenderedFlowDataset(Dataset):
         self.crop = crop
         self.zoom = zoom
         self.crop_focus = float(crop_focus)
+        self.distance = distance
         self._scenes: OrderedDict[int, tuple] = OrderedDict()
         self._camera = None
 
@@ -143,7 +153,7 @@ class RenderedFlowDataset(Dataset):
         """(rgb1, rgb2, flow, valid, label1) of item ``index`` as rendered: whole frames, before zoom and crop.
 
         ``label1`` is the first frame's surface labels (``scenes.splats.LABEL_*``)."""
-        from scenes.groundtruth import flow_between, sample_pose_pair
+        from scenes.groundtruth import DEFAULT_PAIR_DISTANCE, flow_between, sample_pose_pair
         from scenes.render import render_splats
 
         if index < 0:
@@ -151,7 +161,8 @@ class RenderedFlowDataset(Dataset):
         spec, cloud = self.scene(index // self.pairs_per_scene)
         cam = self.camera()
         pose1, pose2 = sample_pose_pair(spec, np.random.default_rng([self.seed, index, 1]),
-                                        max_step=self.max_step, max_turn_rad=self.max_turn_rad)
+                                        max_step=self.max_step, max_turn_rad=self.max_turn_rad,
+                                        distance=self.distance or DEFAULT_PAIR_DISTANCE)
         r1 = render_splats(cloud, cam, pose1)
         r2 = render_splats(cloud, cam, pose2)
         flow, valid = flow_between(cloud, cam, pose1, pose2, renders=(r1, r2))
@@ -240,14 +251,15 @@ def zoom_pair(img1: np.ndarray, img2: np.ndarray, flow: np.ndarray, valid: np.nd
 
 
 def validation_set(size: int = DEFAULT_VALIDATION_SIZE, width: int = DEFAULT_WIDTH,
-                   height: int = DEFAULT_HEIGHT, seed: int = VALIDATION_SEED) -> RenderedFlowDataset:
+                   height: int = DEFAULT_HEIGHT, seed: int = VALIDATION_SEED,
+                   distance: tuple[float, float] | None = None) -> RenderedFlowDataset:
     """The fixed held-out validation pairs (seed :data:`VALIDATION_SEED`, no exposure jitter).
 
-    Another ``seed`` gives an equally built held-out set, e.g. for choosing an inference setting without
-    touching the validation pairs.
+    Another ``seed`` (or ``distance`` range) gives an equally built held-out set, e.g. for choosing an
+    inference setting without touching the validation pairs, or for measuring flow further from the wall.
     """
     return RenderedFlowDataset(seed=seed, length=size, width=width, height=height,
-                               pairs_per_scene=4, exposure_jitter=0.0)
+                               pairs_per_scene=4, exposure_jitter=0.0, distance=distance)
 
 
 def collate(items: list[dict[str, torch.Tensor]]) -> dict[str, torch.Tensor]:

@@ -59,7 +59,7 @@ from tools.raft_data import (
 PROG = "flowgap-train-raft"
 TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height", "crop",
               "crop_focus", "zoom", "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters",
-              "upsample")
+              "upsample", "distance")
 UPSAMPLE_MODES = {"centres": False, "corners": True}   # --upsample -> RaftConfig.upsample_align_corners
 
 
@@ -287,6 +287,8 @@ def train(args: argparse.Namespace) -> dict:
             config["crop_focus"] = 0.0     # nor move crops onto the opening
         if "upsample" not in stored:
             config["upsample"] = "corners"  # nor upsample from block centres
+        if "distance" not in stored:
+            config["distance"] = None      # nor stand further than 2.6 m from the wall
 
     out = Path(args.out)
     if args.init and not resume:
@@ -295,7 +297,8 @@ def train(args: argparse.Namespace) -> dict:
                                   width=config["width"], height=config["height"],
                                   pairs_per_scene=config["pairs_per_scene"], exposure_jitter=config["jitter"],
                                   crop=parse_crop(config.get("crop", "none")), crop_focus=config["crop_focus"],
-                                  zoom=tuple(config["zoom"]) if config.get("zoom") else None)
+                                  zoom=tuple(config["zoom"]) if config.get("zoom") else None,
+                                  distance=tuple(config["distance"]) if config.get("distance") else None)
     val = validation_set(config["val_size"], config["width"], config["height"]) if config["val_size"] else None
 
     torch.manual_seed(config["seed"])
@@ -390,14 +393,17 @@ def eval_only(args: argparse.Namespace) -> dict:
     layout = load_weights_into(model, args.eval_only, variant)
     model.to(device).eval()
     size = args.val_size or DEFAULT_VALIDATION_SIZE
-    pairs = validation_set(size, args.width, args.height, seed=args.val_seed)
+    distance = tuple(args.distance) if args.distance else None
+    pairs = validation_set(size, args.width, args.height, seed=args.val_seed, distance=distance)
     result = evaluate(model, pairs, args.val_iters, device, with_dis=True, **inference_options(args))
     result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, "upsample": upsample,
-              "seed": args.val_seed, **result}
+              "seed": args.val_seed, **({"distance": list(distance)} if distance else {}), **result}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
-    which = "validation" if args.val_seed == VALIDATION_SEED else f"seed-{args.val_seed}"
+    which = "validation" if args.val_seed == VALIDATION_SEED and not distance else f"seed-{args.val_seed}"
+    if distance:
+        which += f" {distance[0]:g}-{distance[1]:g} m"
     print(f"EPE raft-{variant} {result['epe']:.3f} px, dis:medium {result['dis_medium_epe']:.3f} px "
           f"({result['pairs']} {which} pairs, {args.width}x{args.height}, {args.val_iters} iters, "
           f"{describe_inference(args)}) "
@@ -461,6 +467,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--zoom", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
                    help="enlarge each rendered pair by a random factor in [LOW, HIGH] before cropping, so the "
                         "weights also fit the raft backend's input_scale (none: no zoom)")
+    d.add_argument("--distance", type=float, nargs=2, metavar=("NEAR", "FAR"), default=None,
+                   help="range (m) of the first camera's distance before the wall in training pairs (none: "
+                        "0.6 2.6; flights start 3 m away, up to 4 m in random scenes); validation while "
+                        "training keeps its fixed pairs, --eval-only draws its held-out pairs from this range")
     d.add_argument("--seed", type=int, default=0, help="training data and initialisation seed")
     d.add_argument("--jitter", type=float, default=0.1, help="exposure jitter (max relative gain change)")
     d.add_argument("--pairs-per-scene", dest="pairs_per_scene", type=int, default=8,
@@ -543,6 +553,10 @@ def _check(args: argparse.Namespace) -> None:
             raise CliError(f"--zoom must be 1 <= LOW <= HIGH (got {lo} {hi})")
         if crop is None and not args.eval_only:
             raise CliError("--zoom needs a --crop (zoomed frames are larger than the camera's)")
+    if args.distance is not None:
+        near, far = args.distance
+        if not (0.0 < near <= far and math.isfinite(far)):
+            raise CliError(f"--distance must be 0 < NEAR <= FAR metres (got {near} {far})")
     if not 0.0 <= args.jitter < 1.0:
         raise CliError(f"--jitter must be in [0, 1) (got {args.jitter})")
     if not (args.lr > 0 and math.isfinite(args.lr)):

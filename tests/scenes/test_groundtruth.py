@@ -1,5 +1,6 @@
 import cv2
 import numpy as np
+import pytest
 
 from scenes.camera import START_POSE, PinholeCamera, Pose, euler_to_quat
 from scenes.groundtruth import flow_between, gap_mask, warp_backward
@@ -70,3 +71,23 @@ def test_sample_pose_pair(brick_cloud, brick_spec):
         assert p1.position[0] < brick_spec.wall_x - 0.5 and p2.position[0] >= p1.position[0]
         flow, valid = flow_between(brick_cloud, cam, p1, p2)
         assert valid.mean() > 0.5
+
+
+def test_sample_pose_pair_distance_range(brick_spec):
+    from scenes.groundtruth import DEFAULT_PAIR_DISTANCE, sample_pose_pair
+
+    # the default range is the one training pairs always had: the same draws as asking for it
+    assert DEFAULT_PAIR_DISTANCE == (0.6, 2.6)
+    for seed in range(5):
+        assert sample_pose_pair(brick_spec, np.random.default_rng(seed)) == sample_pose_pair(
+            brick_spec, np.random.default_rng(seed), distance=(0.6, 2.6))
+    far = [brick_spec.wall_x - sample_pose_pair(brick_spec, np.random.default_rng(s), distance=(2.9, 3.4))[0]
+           .position[0] for s in range(20)]
+    assert min(far) >= 2.9 and max(far) <= min(3.4, brick_spec.wall_x + 0.5)
+    # never further back than 0.5 m behind the start (x = 0), however far the range reaches
+    deep = [sample_pose_pair(brick_spec, np.random.default_rng(s), distance=(0.6, 50.0))[0].position[0]
+            for s in range(20)]
+    assert min(deep) >= -0.5 - 1e-9
+    for bad in ((0.0, 2.0), (3.0, 2.0), (1.0, float("nan"))):
+        with pytest.raises(ValueError, match="distance"):
+            sample_pose_pair(brick_spec, np.random.default_rng(0), distance=bad)

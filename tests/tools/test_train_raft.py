@@ -150,6 +150,23 @@ def test_crop_focus_moves_the_window_onto_the_opening():
         RenderedFlowDataset(**settings, crop_focus=0.5)
 
 
+def test_distance_moves_the_first_camera_further_from_the_wall():
+    settings = dict(seed=7, width=64, height=64, pairs_per_scene=2)
+    plain = RenderedFlowDataset(**settings)
+    same = RenderedFlowDataset(**settings, distance=(0.6, 2.6))
+    far = RenderedFlowDataset(**settings, distance=(3.0, 4.0))
+    for x, y in zip(plain.pair(1), same.pair(1), strict=True):   # the default range, asked for or not
+        assert np.array_equal(x, y)
+    # further away the same motions make smaller flow: compare median flow over items
+    near_mag = [np.median(np.linalg.norm(plain.pair(i)[2], axis=-1)) for i in range(6)]
+    far_mag = [np.median(np.linalg.norm(far.pair(i)[2], axis=-1)) for i in range(6)]
+    assert np.median(far_mag) < np.median(near_mag)
+    assert validation_set(2, 64, 64, distance=(3.0, 4.0)).distance == (3.0, 4.0)
+    for bad in ((0.0, 1.0), (2.0, 1.0)):
+        with pytest.raises(ValueError, match="distance"):
+            RenderedFlowDataset(**settings, distance=bad)
+
+
 def test_zoom_enlarges_the_pair_and_scales_its_flow_like_a_larger_camera():
     """A zoomed pair's flow matches the exact flow rendered by a camera of twice the resolution."""
     from scenes.camera import PinholeCamera
@@ -262,6 +279,7 @@ def test_run_writes_loadable_weights_and_checkpoints(trained_run):
 def test_checkpoints_from_before_the_upsampling_choice_resume_with_corners(trained_run, tmp_path):
     old = torch.load(trained_run / "checkpoint-000002.pth", weights_only=True)
     del old["upsample_align_corners"], old["train"]["config"]["upsample"], old["train"]["config"]["crop_focus"]
+    del old["train"]["config"]["distance"]
     old["version"] = 1
     torch.save(old, tmp_path / "old.pth")
     rc = train_raft.main(["--resume", str(tmp_path / "old.pth"), "--stop-at", "3", "--out", str(tmp_path / "run"),
@@ -270,6 +288,7 @@ def test_checkpoints_from_before_the_upsampling_choice_resume_with_corners(train
     resumed = torch.load(tmp_path / "run" / "checkpoint-000003.pth", weights_only=True)
     assert resumed["train"]["config"]["upsample"] == "corners" and resumed["upsample_align_corners"] is True
     assert resumed["train"]["config"]["crop_focus"] == 0.0   # nor did they move crops onto the opening
+    assert resumed["train"]["config"]["distance"] is None    # nor stand further than 2.6 m from the wall
     rc = train_raft.main(["--eval-only", str(tmp_path / "run" / "checkpoint-000003.pth"), "--width", "64",
                           "--height", "64", "--val-size", "1", "--val-iters", "1", "--out", str(tmp_path / "ev")])
     assert rc == 0
@@ -341,6 +360,13 @@ def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     assert rc == 0 and "2 seed-7 pairs" in capsys.readouterr().out
     other = json.loads((tmp_path / "other" / "eval.json").read_text())
     assert other["seed"] == 7 and other["epe"] != result["epe"]
+    assert "distance" not in result and "distance" not in other
+    rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
+                          "--height", "64", "--val-size", "2", "--val-iters", "2", "--distance", "3", "4",
+                          "--out", str(tmp_path / "far")])
+    assert rc == 0 and f"2 seed-{VALIDATION_SEED} 3-4 m pairs" in capsys.readouterr().out
+    far = json.loads((tmp_path / "far" / "eval.json").read_text())
+    assert far["distance"] == [3.0, 4.0] and far["epe"] != result["epe"]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -371,6 +397,8 @@ def test_missing_weights_file_is_a_one_line_error_exit_2(tmp_path):
     (["--refine-iters", "0"], "--refine-iters must be at least 1"),
     (["--crop-focus", "nan"], "--crop-focus must be a probability"),
     (["--crop-focus", "0.5", "--crop", "none"], "--crop-focus needs a --crop"),
+    (["--distance", "0", "3"], "--distance must be 0 < NEAR <= FAR"),
+    (["--distance", "3", "2"], "--distance must be 0 < NEAR <= FAR"),
 ])
 def test_bad_input_is_a_one_line_error(argv, needle, tmp_path, capsys):
     rc = train_raft.main([*argv, "--out", str(tmp_path), "--quiet"])
