@@ -3,7 +3,9 @@
 Each module in ``tools/benchmarks/`` is one group (``vehicle``, ``scenes``, ``tlog``, ...) and exposes
 ``run() -> dict[str, dict]`` mapping a key such as ``vehicle.steps_per_s`` to ``{"value": x, "unit": u}``.
 Results are merged into ``bench/results.json`` so that one group can be re-run alone without losing the
-others. Each benchmark measures the median of several runs itself.
+others; a key that a re-run no longer writes is dropped once every group writing under its prefix has run
+(a renamed benchmark leaves no stale number behind). Each benchmark measures the median of several runs
+itself.
 """
 
 from __future__ import annotations
@@ -28,6 +30,16 @@ def available_groups() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(benchmarks_pkg.__path__) if not m.name.startswith("_"))
 
 
+def key_prefix(group: str) -> str:
+    """The first word of a group's keys: group "vehicle_link" writes "vehicle.*" keys."""
+    return group.split("_")[0]
+
+
+def rerun_prefixes(groups: list[str]) -> set[str]:
+    """The key prefixes that running ``groups`` rewrites wholly: those of which every group ran."""
+    return {key_prefix(g) for g in groups} - {key_prefix(g) for g in available_groups() if g not in groups}
+
+
 def run_groups(groups: list[str]) -> dict[str, dict]:
     results: dict[str, dict] = {}
     for group in groups:
@@ -36,20 +48,25 @@ def run_groups(groups: list[str]) -> dict[str, dict]:
         out = module.run()
         for key, entry in out.items():
             # A group's keys live under its first word: group "vehicle_link" may write "vehicle.*".
-            if key.split(".")[0] != group.split("_")[0] or not {"value", "unit"} <= set(entry):
+            if key.split(".")[0] != key_prefix(group) or not {"value", "unit"} <= set(entry):
                 raise ValueError(f"benchmark group {group!r} returned malformed entry {key!r}: {entry!r}")
         results.update(out)
         log.info("%s done in %.1f s", group, time.perf_counter() - t0)
     return results
 
 
-def merge_results(new: dict[str, dict], path: Path = RESULTS) -> dict[str, dict]:
+def merge_results(new: dict[str, dict], path: Path = RESULTS,
+                  rerun_prefixes: set[str] = frozenset()) -> dict[str, dict]:
+    """Merge ``new`` into the results file; old keys under ``rerun_prefixes`` that ``new`` lacks are dropped."""
     merged: dict[str, dict] = {}
     if path.exists():
         try:
             merged = json.loads(path.read_text())
         except json.JSONDecodeError:
             log.warning("%s is not valid JSON; starting it afresh", path)
+    for key in [k for k in merged if k.split(".")[0] in rerun_prefixes and k not in new]:
+        log.info("dropping %s: no benchmark writes it any more", key)
+        del merged[key]
     merged.update(new)
     merged["_machine"] = {"value": f"{platform.machine()} {platform.processor() or ''}".strip(), "unit": "",
                           "python": platform.python_version()}
@@ -73,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"flowgap-bench: unknown group(s) {unknown}; choose from {available_groups()}", file=sys.stderr)
         return 2
     new = run_groups(groups)
-    merge_results(new, args.output)
+    merge_results(new, args.output, rerun_prefixes(groups))
     width = max((len(k) for k in new), default=0)
     for key, entry in sorted(new.items()):
         print(f"{key:<{width}}  {entry['value']:>12.4g} {entry['unit']}")
