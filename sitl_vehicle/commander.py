@@ -40,6 +40,11 @@ OBL_ACTION_LAND = 4
 # 2 Return, 3 Land, 5 terminate, 6 disarm
 DLL_ACTIONS = {1: FlightMode.AUTO_LOITER, 2: FlightMode.AUTO_RTL, 3: FlightMode.AUTO_LAND}
 DLL_STOP_MOTORS = (5, 6)
+# COM_RCL_EXCEPT / COM_DLL_EXCEPT bits (PX4's link-loss exceptions): 1 Mission, 2 the other auto modes (Hold,
+# Takeoff, Land, Return), 4 Offboard; a loss in an excepted mode is only reported. The stick modes need the
+# sticks and are never excepted.
+LOSS_EXCEPTION_BIT = {FlightMode.AUTO_MISSION: 1, FlightMode.AUTO_LOITER: 2, FlightMode.AUTO_TAKEOFF: 2,
+                      FlightMode.AUTO_LAND: 2, FlightMode.AUTO_RTL: 2, FlightMode.OFFBOARD: 4}
 # PX4 refuses to arm in Position or Altitude mode with the throttle stick above this (0.5 = centre), and in
 # Stabilized or Manual mode unless the throttle is low
 ARM_THROTTLE_MAX = 0.6
@@ -113,6 +118,7 @@ class Commander:
         self._offboard_time = -math.inf
         self._gcs_time: float | None = None  # last ground-station heartbeat (None: never connected)
         self._gcs_lost = False
+        self._gcs_failsafe_done = False  # the data-link failsafe acted on this loss already
         self._rtl_leg: str | None = None
         self._rtl_start_xy = (0.0, 0.0)
         self._rtl_z = 0.0
@@ -120,6 +126,8 @@ class Commander:
         self._sticks: Sticks | None = None
         self._sticks_time = -math.inf
         self._manual_lost = False
+        self._manual_lost_at_arming = False  # armed without sticks: their loss is ignored until they return
+        self._manual_failsafe_done = False  # the manual-control failsafe acted on this loss already
         self._stick_hold_xy: tuple[float, float] | None = None  # where centred sticks hold (Position mode)
         self._stick_hold_z: float | None = None  # the altitude a centred throttle holds
         self._stick_yawing = False
@@ -146,6 +154,8 @@ class Commander:
         self._has_flown = False
         self._landed_since = status.time_s if status.landed else None
         self.failsafe = False
+        self._manual_lost_at_arming = self._manual_lost
+        self._manual_failsafe_done = self._gcs_failsafe_done = False
         self._enter(self.mode, status)
         self._say(mavlink.MAV_SEVERITY_INFO, "Armed by external command")
         return ACCEPTED
@@ -208,7 +218,7 @@ class Commander:
         """A ground station's HEARTBEAT arrived (the data link whose loss NAV_DLL_ACT acts on)."""
         self._gcs_time = time_s
         if self._gcs_lost:
-            self._gcs_lost = False
+            self._gcs_lost = self._gcs_failsafe_done = False
             self._say(mavlink.MAV_SEVERITY_INFO, "Data link regained")
 
     def offboard_setpoint(self, setpoint: Setpoint, time_s: float) -> None:
@@ -255,7 +265,7 @@ class Commander:
         self._sticks = sticks
         self._sticks_time = time_s
         if self._manual_lost:
-            self._manual_lost = False
+            self._manual_lost = self._manual_lost_at_arming = self._manual_failsafe_done = False
             self._say(mavlink.MAV_SEVERITY_INFO, "Manual control regained")
 
     # ------------------------------------------------------------------------------------ update
@@ -268,9 +278,17 @@ class Commander:
         if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(now):
             self._offboard_lost(status)
         if self._sticks is not None and not self._manual_lost and not self._manual_alive(now):
-            self._manual_control_lost(status)
+            self._manual_lost = True
+            self._say(mavlink.MAV_SEVERITY_CRITICAL, "Manual control lost")
+        if self._manual_lost and self.armed and not (self._manual_failsafe_done or self._manual_lost_at_arming
+                                                     or self._loss_excepted("COM_RCL_EXCEPT")):
+            self._manual_control_failsafe(status)
         if self._gcs_time is not None and not self._gcs_lost and now - self._gcs_time > self.params["COM_DL_LOSS_T"]:
-            self._data_link_lost(status)
+            self._gcs_lost = True
+            self._say(mavlink.MAV_SEVERITY_CRITICAL, "Connection to ground station lost")
+        if self._gcs_lost and self.armed and not status.landed and not (
+                self._gcs_failsafe_done or self.mode is FlightMode.AUTO_LAND or self._loss_excepted("COM_DLL_EXCEPT")):
+            self._data_link_failsafe(status)
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
             if abs(status.position[2] - self._takeoff_target[2]) <= self.params["NAV_ACC_RAD"]:
                 self._say(mavlink.MAV_SEVERITY_INFO, "Takeoff complete: holding")
@@ -522,34 +540,39 @@ class Commander:
             action, FlightMode.AUTO_LOITER)
         self._fail_safe("offboard", target, status)
 
-    def _manual_control_lost(self, status: VehicleStatus) -> None:
-        """PX4's manual-control-loss failsafe, acted on (NAV_RCL_ACT) in the stick modes, which need it."""
-        self._manual_lost = True
-        self._say(mavlink.MAV_SEVERITY_CRITICAL, "Manual control lost")
-        if not (self.armed and self.mode.manual):
-            return
+    def _loss_excepted(self, param: str) -> bool:
+        """Whether the link-loss exception mask ``param`` (COM_RCL_EXCEPT, COM_DLL_EXCEPT) covers this mode."""
+        return bool(int(self.params[param]) & LOSS_EXCEPTION_BIT.get(self.mode, 0))
+
+    def _manual_control_failsafe(self, status: VehicleStatus) -> None:
+        """PX4's manual-control-loss failsafe (NAV_RCL_ACT): once per loss, in any mode COM_RCL_EXCEPT does not
+        except, and not when the vehicle was armed without sticks."""
+        self._manual_failsafe_done = True
         action = int(self.params["NAV_RCL_ACT"])
         self._fail_safe("manual control", None if action in DLL_STOP_MOTORS
                         else DLL_ACTIONS.get(action, FlightMode.AUTO_LOITER), status)
 
-    def _data_link_lost(self, status: VehicleStatus) -> None:
-        """PX4's data-link-loss failsafe: only once a ground station had connected, only in the air."""
-        self._gcs_lost = True
-        self._say(mavlink.MAV_SEVERITY_CRITICAL, "Connection to ground station lost")
+    def _data_link_failsafe(self, status: VehicleStatus) -> None:
+        """PX4's data-link-loss failsafe (NAV_DLL_ACT): once a ground station had connected, once per loss, in
+        the air, in any mode but Land that COM_DLL_EXCEPT does not except."""
+        self._gcs_failsafe_done = True
         action = int(self.params["NAV_DLL_ACT"])
-        if not self.armed or status.landed or not (action in DLL_ACTIONS or action in DLL_STOP_MOTORS):
-            return
-        self._fail_safe("data link", None if action in DLL_STOP_MOTORS else DLL_ACTIONS[action], status)
+        if action in DLL_ACTIONS or action in DLL_STOP_MOTORS:
+            self._fail_safe("data link", None if action in DLL_STOP_MOTORS else DLL_ACTIONS[action], status)
 
     def _fail_safe(self, lost: str, target: FlightMode | None, status: VehicleStatus) -> None:
         """Act on the loss of ``lost``: switch to ``target`` (Hold instead of Return on the ground), or stop
-        the motors when ``target`` is None."""
+        the motors when ``target`` is None. Already in ``target``, or landing when ``target`` is Return, the
+        vehicle carries on (PX4 does not restart a Return, nor turn a landing into one)."""
         self.failsafe = True
         if target is None:
             self._disarm(f"Failsafe: {lost} lost, motors stopped")
             return
         if target is FlightMode.AUTO_RTL and status.landed:
             target = FlightMode.AUTO_LOITER
+        if target is self.mode or (target is FlightMode.AUTO_RTL and self.mode is FlightMode.AUTO_LAND):
+            self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, continuing {self.mode.label}")
+            return
         self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {target.label}")
         self._enter(target, status)
 

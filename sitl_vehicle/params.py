@@ -92,15 +92,20 @@ COMMANDER_PARAMS = [
     ParamSpec("NAV_DLL_ACT", 0.0, 0.0, 6.0, "enum", "Ground-station link loss action: 0 = none, 1 = Hold, "
               "2 = Return, 3 = Land, 5/6 = stop the motors (terminate/disarm)"),
     ParamSpec("COM_DL_LOSS_T", 10.0, 1.0, 300.0, "s", "Ground-station heartbeat timeout before the link is lost"),
+    ParamSpec("COM_DLL_EXCEPT", 0.0, 0.0, 7.0, "bitmask", "Modes where ground-station link loss is only "
+              "reported: 1 Mission, 2 Hold/Takeoff/Land/Return, 4 Offboard (it never acts in Land)"),
     ParamSpec("RTL_RETURN_ALT", 60.0, 0.0, 150.0, "m", "Return: climb to at least this altitude above home"),
     ParamSpec("RTL_DESCEND_ALT", 30.0, 0.5, 100.0, "m", "Return: descend to this altitude above home, then land"),
     ParamSpec("RTL_LAND_DELAY", 0.0, -1.0, 300.0, "s", "Return: hover this long above home before landing "
               "(<0: hover until told otherwise)"),
     # the stick modes (MANUAL_CONTROL from a joystick), sitl_vehicle.manual
     ParamSpec("COM_RC_LOSS_T", 0.5, 0.0, 35.0, "s", "Manual control timeout before the manual-control-loss "
-              "failsafe (stick modes)"),
-    ParamSpec("NAV_RCL_ACT", 2.0, 0.0, 6.0, "enum", "Manual control loss action in the stick modes: "
-              "1 = Hold, 2 = Return, 3 = Land, 5/6 = stop the motors (terminate/disarm); others: Hold"),
+              "failsafe"),
+    ParamSpec("NAV_RCL_ACT", 2.0, 0.0, 6.0, "enum", "Manual control loss action (once sticks were heard, "
+              "armed with them): 1 = Hold, 2 = Return, 3 = Land, 5/6 = stop the motors (terminate/disarm); "
+              "others: Hold"),
+    ParamSpec("COM_RCL_EXCEPT", 0.0, 0.0, 7.0, "bitmask", "Modes where manual control loss is only reported: "
+              "1 Mission, 2 Hold/Takeoff/Land/Return, 4 Offboard (the stick modes always act on it)"),
     ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 1.0, "-", "Stick dead zone of the stick modes"),
     ParamSpec("MPC_XY_MAN_EXPO", 0.6, 0.0, 1.0, "-", "Horizontal stick expo (0 linear, 1 cubic)"),
     ParamSpec("MPC_Z_MAN_EXPO", 0.6, 0.0, 1.0, "-", "Throttle stick expo (0 linear, 1 cubic)"),

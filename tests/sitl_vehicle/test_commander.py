@@ -190,6 +190,29 @@ def test_data_link_loss_is_only_reported_when_disabled_never_connected_or_landed
     assert not commander.update(at(95.0, 0.0, 0.0, -2.0)).armed
 
 
+def test_data_link_loss_never_acts_in_land_nor_in_modes_com_dll_except_excepts(commander):
+    commander.params.set("NAV_DLL_ACT", 2.0)                            # Return
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.gcs_heartbeat(0.0)
+    commander.land(at(1.0, 0.0, 0.0, -2.0))
+    out = commander.update(at(11.0, 0.0, 0.0, -2.0))
+    assert out.mode is FlightMode.AUTO_LAND and not commander.failsafe
+    assert commander.messages[-1][1] == "Connection to ground station lost"
+
+    excepted = Commander(ParameterStore(COMMANDER_PARAMS))
+    excepted.params.set("NAV_DLL_ACT", 3.0)                             # Land
+    excepted.params.set("COM_DLL_EXCEPT", 4.0)                          # but not in Offboard
+    excepted.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    excepted.gcs_heartbeat(0.0)
+    for t in (0.5, 11.0):
+        excepted.offboard_setpoint(Setpoint(position=(1.0, 0.0, -2.0)), t)
+        if t == 0.5:
+            assert excepted.set_mode(FlightMode.OFFBOARD, at(t, 0.0, 0.0, 0.0, landed=True)).accepted
+        assert excepted.update(at(t, 1.0, 0.0, -2.0)).mode is FlightMode.OFFBOARD and not excepted.failsafe
+    assert excepted.set_mode(FlightMode.AUTO_LOITER, at(11.1, 1.0, 0.0, -2.0)).accepted
+    assert excepted.update(at(11.2, 1.0, 0.0, -2.0)).mode is FlightMode.AUTO_LAND and excepted.failsafe
+
+
 def test_preflight_auto_disarm_without_takeoff(commander):
     commander.arm(status(t=0.0))
     assert commander.update(status(t=9.9)).armed

@@ -159,16 +159,66 @@ def test_manual_control_loss_fails_safe_as_nav_rcl_act_says(commander, action, m
     assert commander.messages[-1][1] == "Manual control regained"
 
 
-def test_manual_control_loss_can_stop_the_motors_and_is_only_reported_in_other_modes(commander):
+def test_manual_control_loss_can_stop_the_motors(commander):
     commander.params.set("NAV_RCL_ACT", 6.0)
     airborne_in(commander, FlightMode.POSCTL)
     assert not commander.update(flying(2.0)).armed
-    other = Commander(ParameterStore(COMMANDER_PARAMS))
-    other.manual_control(CENTRED, 0.0)
-    other.arm(status())
-    out = other.update(flying(2.0))
-    assert out.mode is FlightMode.AUTO_LOITER and out.armed and not other.failsafe
-    assert other.messages[-1][1] == "Manual control lost"
+    assert any("motors stopped" in t for _, t in commander.messages)
+
+
+def _hold_with_sticks_then_silent(commander, t_lost=2.0):
+    """Sticks heard, armed in Hold on the ground, in the air; the sticks stop. Returns the update at t_lost."""
+    commander.manual_control(CENTRED, 0.0)
+    assert commander.arm(status()).accepted
+    return commander.update(flying(t_lost))
+
+
+def test_manual_control_loss_acts_in_every_mode_com_rcl_except_does_not_except(commander):
+    out = _hold_with_sticks_then_silent(commander)              # PX4 acts in Hold too (COM_RCL_EXCEPT 0)
+    assert out.mode is FlightMode.AUTO_RTL and commander.failsafe
+    texts = [t for _, t in commander.messages]
+    assert "Manual control lost" in texts and "Failsafe: manual control lost, switching to Return" in texts
+    # once per loss: the pilot may take over by switching mode, and the failsafe does not come back
+    assert commander.set_mode(FlightMode.AUTO_LOITER, flying(2.1)).accepted
+    assert commander.update(flying(3.0)).mode is FlightMode.AUTO_LOITER
+
+    excepted = Commander(ParameterStore(COMMANDER_PARAMS))
+    excepted.params.set("COM_RCL_EXCEPT", 2.0)                   # Hold and the other auto modes
+    out = _hold_with_sticks_then_silent(excepted)
+    assert out.mode is FlightMode.AUTO_LOITER and not excepted.failsafe
+    assert excepted.messages[-1][1] == "Manual control lost"
+    # leaving the excepted mode while the sticks are still lost acts on the loss there
+    from sitl_vehicle.sim import Setpoint
+    excepted.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 2.1)
+    assert excepted.set_mode(FlightMode.OFFBOARD, flying(2.1)).accepted
+    assert excepted.update(flying(2.2)).mode is FlightMode.AUTO_RTL and excepted.failsafe
+
+
+def test_manual_control_loss_is_ignored_when_armed_without_sticks_until_they_return(commander):
+    commander.manual_control(CENTRED, 0.0)
+    commander.update(status(1.0))                                # lost before arming
+    assert commander.messages[-1][1] == "Manual control lost"
+    assert commander.arm(status(1.0)).accepted
+    assert commander.update(flying(5.0)).mode is FlightMode.AUTO_LOITER and not commander.failsafe
+    commander.manual_control(CENTRED, 5.1)                       # back: a later loss counts
+    assert commander.messages[-1][1] == "Manual control regained"
+    assert commander.update(flying(5.2)).mode is FlightMode.AUTO_LOITER
+    assert commander.update(flying(6.0)).mode is FlightMode.AUTO_RTL and commander.failsafe
+    never = Commander(ParameterStore(COMMANDER_PARAMS))          # no sticks ever (the companion's flights)
+    never.arm(status())
+    assert never.update(flying(60.0)).mode is FlightMode.AUTO_LOITER and not never.messages[-1][1].startswith(
+        "Manual control")
+
+
+@pytest.mark.parametrize("mode", [FlightMode.AUTO_LAND, FlightMode.AUTO_RTL])
+def test_manual_control_loss_does_not_turn_a_landing_or_a_return_into_a_new_return(commander, mode):
+    commander.manual_control(CENTRED, 0.0)
+    assert commander.arm(status()).accepted
+    assert commander.set_mode(mode, flying(0.1)).accepted
+    before = commander.update(flying(0.2)).setpoint
+    out = commander.update(flying(2.0))                          # NAV_RCL_ACT 2: Return
+    assert out.mode is mode and commander.failsafe and out.setpoint == before
+    assert commander.messages[-1][1] == f"Failsafe: manual control lost, continuing {mode.label}"
 
 
 def test_stick_modes_encode_like_px4():
