@@ -41,6 +41,8 @@ from companion.flow.raft.backend import (
     DEFAULT_INPUT_SCALE,
     DEFAULT_MIRROR_AVERAGE,
     DEFAULT_REFINE_ITERS,
+    DEFAULT_REFINE_MAX_FLOW,
+    DEFAULT_REFINE_MIN_SCALE,
     DEFAULT_REFINE_SCALE,
     INPUT_SCALE_RANGE,
     estimate_flow,
@@ -96,11 +98,12 @@ def _epe_sum(flow: np.ndarray, gt: np.ndarray, valid: np.ndarray) -> tuple[float
 @torch.no_grad()
 def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, device: torch.device,
              with_dis: bool = False, input_scale: float = 1.0, mirror_average: bool = False,
-             refine_scale: float | None = None, refine_iters: int = DEFAULT_REFINE_ITERS) -> dict:
+             refine_scale: float | None = None, refine_iters: int = DEFAULT_REFINE_ITERS,
+             refine_min_scale: float = DEFAULT_REFINE_MIN_SCALE, refine_max_flow: float = 0.0) -> dict:
     """Validation EPE (mean over all valid pixels of all pairs) of ``model``, optionally of DIS medium.
 
-    ``input_scale``, ``mirror_average``, ``refine_scale`` and ``refine_iters`` are the ``raft`` backend's
-    inference options (``estimate_flow``).
+    ``input_scale``, ``mirror_average``, ``refine_scale``, ``refine_iters``, ``refine_min_scale`` and
+    ``refine_max_flow`` are the ``raft`` backend's inference options (``estimate_flow``).
     """
     was_training = model.training
     model.eval()
@@ -115,7 +118,8 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
         img1, img2, gt, valid = dataset.pair(i)
         flow, _ = estimate_flow(model, img1, img2, iters=iters, input_scale=input_scale, device=device,
                                 mirror_average=mirror_average, refine_scale=refine_scale,
-                                refine_iters=refine_iters)
+                                refine_iters=refine_iters, refine_min_scale=refine_min_scale,
+                                refine_max_flow=refine_max_flow)
         s, c = _epe_sum(flow, gt, valid)
         raft_sum += s
         count += c
@@ -126,6 +130,8 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
     result = {"pairs": len(dataset), "valid_pixels": count, "width": dataset.width, "height": dataset.height,
               "iters": iters, "input_scale": input_scale, "mirror_average": mirror_average,
               "refine_scale": refine_scale or 0.0, "refine_iters": refine_iters if refine_scale else 0,
+              "refine_min_scale": refine_min_scale if refine_scale else 0.0,
+              "refine_max_flow": refine_max_flow if refine_scale else 0.0,
               "epe": raft_sum / count if count else float("nan")}
     if dis is not None:
         result["dis_medium_epe"] = dis_sum / count if count else float("nan")
@@ -135,13 +141,18 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, iters: int, d
 def inference_options(args: argparse.Namespace) -> dict:
     """The raft backend's inference options that the command line sets, as :func:`evaluate` takes them."""
     return {"input_scale": args.input_scale, "mirror_average": args.mirror_average,
-            "refine_scale": args.refine_scale or None, "refine_iters": args.refine_iters}
+            "refine_scale": args.refine_scale or None, "refine_iters": args.refine_iters,
+            "refine_min_scale": args.refine_min_scale, "refine_max_flow": args.refine_max_flow}
 
 
 def describe_inference(args: argparse.Namespace) -> str:
-    """'input scale 1, refined at scale 2 (4 iters)' and the like, for the one-line summaries."""
+    """'input scale 1, refined at scale 2-2.5 (motion within 64 px, 4 iters)' and the like, for the one-line
+    summaries."""
     text = f"input scale {args.input_scale:g}"
-    if args.refine_scale:
+    if args.refine_scale and args.refine_max_flow and args.refine_min_scale < args.refine_scale:
+        text += (f", refined at scale {args.refine_min_scale:g}-{args.refine_scale:g} (motion within "
+                 f"{args.refine_max_flow:g} px, {args.refine_iters} iters)")
+    elif args.refine_scale:
         text += f", refined at scale {args.refine_scale:g} ({args.refine_iters} iters)"
     return text + (", mirror-averaged" if args.mirror_average else "")
 
@@ -493,6 +504,12 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--refine-scale", dest="refine_scale", type=float, default=DEFAULT_REFINE_SCALE, metavar="S",
                    help="after the pass at --input-scale, refine on frames enlarged by S, started from that "
                         "pass's flow, as the raft backend's refine_scale does (0: one pass)")
+    v.add_argument("--refine-min-scale", dest="refine_min_scale", type=float, default=DEFAULT_REFINE_MIN_SCALE,
+                   metavar="S", help="lower the refinement scale no further than this (raft refine_min_scale)")
+    v.add_argument("--refine-max-flow", dest="refine_max_flow", type=float, default=DEFAULT_REFINE_MAX_FLOW,
+                   metavar="PX", help="lower the refinement scale so that the first pass's 99th-percentile "
+                                      "flow, enlarged, stays within PX pixels (raft refine_max_flow; 0: always "
+                                      "--refine-scale)")
     v.add_argument("--refine-iters", dest="refine_iters", type=int, default=DEFAULT_REFINE_ITERS, metavar="N",
                    help="RAFT iterations of the refinement pass")
     v.add_argument("--val-every", dest="val_every", type=int, default=200,
@@ -540,6 +557,11 @@ def _check(args: argparse.Namespace) -> None:
         raise CliError(f"--input-scale must be within {lo:g}..{hi:g} (got {args.input_scale})")
     if args.refine_scale != 0 and not (math.isfinite(args.refine_scale) and lo <= args.refine_scale <= hi):
         raise CliError(f"--refine-scale must be 0 (one pass) or within {lo:g}..{hi:g} (got {args.refine_scale})")
+    if not (math.isfinite(args.refine_min_scale) and lo <= args.refine_min_scale <= hi):
+        raise CliError(f"--refine-min-scale must be within {lo:g}..{hi:g} (got {args.refine_min_scale})")
+    if not (math.isfinite(args.refine_max_flow) and args.refine_max_flow >= 0):
+        raise CliError(f"--refine-max-flow must be 0 (a fixed --refine-scale) or positive pixels "
+                       f"(got {args.refine_max_flow})")
     if args.refine_iters < 1:
         raise CliError(f"--refine-iters must be at least 1 (got {args.refine_iters}); use --refine-scale 0 "
                        "for one pass")

@@ -57,6 +57,7 @@ def test_registry_rejects_unknown_and_bad_inputs():
     ("raft:scale=1.5,mirror=0", ("raft", {"input_scale": 1.5, "mirror_average": False})),
     ("raft:refine=0", ("raft", {"refine_scale": 0.0})),
     ("raft:refine=1.5,refine_iters=6", ("raft", {"refine_scale": 1.5, "refine_iters": 6})),
+    ("raft:refine_min=1.5,refine_flow=0", ("raft", {"refine_min_scale": 1.5, "refine_max_flow": 0.0})),
 ])
 def test_backend_specs_parse_to_options(spec, expected):
     from companion.flow.registry import parse_backend
@@ -70,6 +71,7 @@ def test_backend_specs_parse_to_options(spec, expected):
     ("raft:mirror=yes", "mirror must be 0 or 1"),
     ("raft:refine=x", "refine must be a number"),
     ("raft:refine_iters=1.5", "refine_iters must be a number"),
+    ("raft:refine_flow=far", "refine_flow must be a number of pixels"),
     ("farneback:x", "only dis:<preset>"),
 ])
 def test_bad_backend_specs_are_one_line_errors(spec, needle):

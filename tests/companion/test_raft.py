@@ -290,15 +290,52 @@ def test_refinement_pass_is_a_second_pass_on_enlarged_frames_started_from_the_fi
     assert_silenced_flow_head_returns_init(refined, img1, img2, (1.5, -0.5))
 
 
+def test_the_refinement_scale_keeps_the_enlarged_motion_within_refine_max_flow():
+    from companion.flow.raft.backend import refinement_scale
+
+    def uniform(length):
+        return np.full((24, 32, 2), length / np.sqrt(2.0), np.float32)
+
+    assert refinement_scale(uniform(20.0), 2.5, 2.0, 64.0) == pytest.approx(2.5)        # 20 px × 2.5 = 50 px
+    assert refinement_scale(uniform(30.0), 2.5, 2.0, 64.0) == pytest.approx(64.0 / 30.0)
+    assert refinement_scale(uniform(40.0), 2.5, 2.0, 64.0) == pytest.approx(2.0)        # never below the floor
+    assert refinement_scale(np.zeros((24, 32, 2), np.float32), 2.5, 2.0, 64.0) == pytest.approx(2.5)
+    assert refinement_scale(uniform(40.0), 2.5, 2.0, 0.0) == 2.5                         # 0: fixed
+    assert refinement_scale(uniform(40.0), 1.5, 2.0, 64.0) == 1.5                        # floor above: fixed
+    # the 99th percentile, not the mean, decides: a few fast pixels (1 %) do not
+    flow = uniform(10.0)
+    flow[:2, :2] = 100.0
+    assert refinement_scale(flow, 2.5, 2.0, 64.0) == pytest.approx(2.5)
+
+
+def test_an_adaptive_refinement_runs_the_second_pass_at_the_scale_it_picks():
+    from companion.flow.raft.backend import refinement_scale
+
+    img1, img2 = textured_pair(72, 88, (2.0, 1.0))
+    adaptive = make_flow_backend("raft", random_init_seed=5, iters=2, refine_scale=2.0, refine_min_scale=1.25,
+                                 refine_max_flow=3.0, refine_iters=2)
+    first = make_flow_backend("raft", random_init_seed=5, iters=2, refine_scale=0)
+    coarse = first.estimate(img1, img2)
+    scale = refinement_scale(coarse, 2.0, 1.25, 3.0)
+    assert 1.25 <= scale < 2.0                                      # lowered, for this pair's motion
+    second = make_flow_backend("raft", random_init_seed=5, iters=2, input_scale=scale, refine_scale=0)
+    np.testing.assert_array_equal(adaptive.estimate(img1, img2), second.estimate(img1, img2, flow_init=coarse))
+
+
 def test_the_default_settings_are_the_shipped_weights_own():
+    from companion.flow.raft.backend import DEFAULT_REFINE_MAX_FLOW, DEFAULT_REFINE_MIN_SCALE
+
     backend = make_flow_backend("raft", random_init_seed=1)
     assert (backend.input_scale, backend.refine_scale, backend.refine_iters, backend.mirror_average) == \
         (DEFAULT_INPUT_SCALE, DEFAULT_REFINE_SCALE, DEFAULT_REFINE_ITERS, DEFAULT_MIRROR_AVERAGE)
+    assert (backend.refine_min_scale, backend.refine_max_flow) == (DEFAULT_REFINE_MIN_SCALE, DEFAULT_REFINE_MAX_FLOW)
 
 
 @pytest.mark.parametrize("options, needle", [
     ({"refine_scale": float("nan")}, "refine_scale must be 0"), ({"refine_scale": 8.0}, "refine_scale must be 0"),
     ({"refine_scale": -1.0}, "refine_scale must be 0"), ({"refine_iters": 0}, "refine_iters must be >= 1"),
+    ({"refine_min_scale": 0.0}, "refine_min_scale must be within"),
+    ({"refine_max_flow": -1.0}, "refine_max_flow must be 0"), ({"refine_max_flow": float("inf")}, "refine_max_flow"),
 ])
 def test_bad_refinement_settings_are_refused(options, needle):
     with pytest.raises(ValueError, match=needle):

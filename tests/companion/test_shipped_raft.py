@@ -11,6 +11,8 @@ from companion.flow.raft.backend import (
     DEFAULT_INPUT_SCALE,
     DEFAULT_MIRROR_AVERAGE,
     DEFAULT_REFINE_ITERS,
+    DEFAULT_REFINE_MAX_FLOW,
+    DEFAULT_REFINE_MIN_SCALE,
     DEFAULT_REFINE_SCALE,
     DEFAULT_WEIGHTS,
 )
@@ -44,7 +46,9 @@ def test_model_card_epe_is_reproduced(tmp_path):
             "--val-size", str(val["pairs"]), "--width", str(val["width"]), "--height", str(val["height"]),
             "--val-iters", str(val["iters"]), "--input-scale", str(val.get("input_scale", 1.0)),
             "--mirror-average" if val.get("mirror_average") else "--no-mirror-average",
-            "--refine-scale", str(val.get("refine_scale", 0)), "--refine-iters", str(val.get("refine_iters") or 1)]
+            "--refine-scale", str(val.get("refine_scale", 0)), "--refine-iters", str(val.get("refine_iters") or 1),
+            "--refine-min-scale", str(val.get("refine_min_scale") or DEFAULT_REFINE_MIN_SCALE),
+            "--refine-max-flow", str(val.get("refine_max_flow", 0))]
     assert train_raft.main(argv) == 0
     result = json.loads((tmp_path / "eval.json").read_text())
     assert result["pairs"] == val["pairs"] and result["valid_pixels"] == val["valid_pixels"]
@@ -57,4 +61,6 @@ def test_model_card_epe_is_reproduced(tmp_path):
     assert val["input_scale"] == DEFAULT_INPUT_SCALE and f"input scale {DEFAULT_INPUT_SCALE:g}" in card
     assert val.get("mirror_average", False) == DEFAULT_MIRROR_AVERAGE
     assert (val["refine_scale"], val["refine_iters"]) == (DEFAULT_REFINE_SCALE, DEFAULT_REFINE_ITERS)
-    assert f"refined at input scale {DEFAULT_REFINE_SCALE:g} ({DEFAULT_REFINE_ITERS} iterations)" in card
+    assert (val["refine_min_scale"], val["refine_max_flow"]) == (DEFAULT_REFINE_MIN_SCALE, DEFAULT_REFINE_MAX_FLOW)
+    assert (f"refined at input scale {DEFAULT_REFINE_MIN_SCALE:g}–{DEFAULT_REFINE_SCALE:g} (motion within "
+            f"{DEFAULT_REFINE_MAX_FLOW:g} px, {DEFAULT_REFINE_ITERS} iterations)") in card

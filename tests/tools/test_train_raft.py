@@ -340,13 +340,21 @@ def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     assert result["input_scale"] == train_raft.DEFAULT_INPUT_SCALE          # the raft backend's defaults
     assert result["refine_scale"] == train_raft.DEFAULT_REFINE_SCALE
     assert result["refine_iters"] == train_raft.DEFAULT_REFINE_ITERS
-    assert f"refined at scale {train_raft.DEFAULT_REFINE_SCALE:g}" in out
+    assert result["refine_min_scale"] == train_raft.DEFAULT_REFINE_MIN_SCALE
+    assert result["refine_max_flow"] == train_raft.DEFAULT_REFINE_MAX_FLOW
+    assert (f"refined at scale {train_raft.DEFAULT_REFINE_MIN_SCALE:g}-{train_raft.DEFAULT_REFINE_SCALE:g} "
+            f"(motion within {train_raft.DEFAULT_REFINE_MAX_FLOW:g} px") in out
     rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
                           "--height", "64", "--val-size", "2", "--val-iters", "2", "--refine-scale", "0",
                           "--out", str(tmp_path / "one-pass")])
     assert rc == 0 and "refined" not in capsys.readouterr().out
     one_pass = json.loads((tmp_path / "one-pass" / "eval.json").read_text())
     assert one_pass["refine_scale"] == 0 and one_pass["refine_iters"] == 0 and one_pass["epe"] != result["epe"]
+    assert one_pass["refine_max_flow"] == 0
+    rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
+                          "--height", "64", "--val-size", "2", "--val-iters", "2", "--refine-max-flow", "0",
+                          "--out", str(tmp_path / "fixed")])
+    assert rc == 0 and f"refined at scale {train_raft.DEFAULT_REFINE_SCALE:g} (" in capsys.readouterr().out
     rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
                           "--height", "64", "--val-size", "2", "--val-iters", "2", "--input-scale", "1.5",
                           "--out", str(tmp_path / "zoomed")])
@@ -395,6 +403,8 @@ def test_missing_weights_file_is_a_one_line_error_exit_2(tmp_path):
     (["--input-scale", "0"], "--input-scale must be within"),
     (["--refine-scale", "9"], "--refine-scale must be 0 (one pass) or within"),
     (["--refine-iters", "0"], "--refine-iters must be at least 1"),
+    (["--refine-min-scale", "nan"], "--refine-min-scale must be within"),
+    (["--refine-max-flow", "-3"], "--refine-max-flow must be 0"),
     (["--crop-focus", "nan"], "--crop-focus must be a probability"),
     (["--crop-focus", "0.5", "--crop", "none"], "--crop-focus needs a --crop"),
     (["--distance", "0", "3"], "--distance must be 0 < NEAR <= FAR"),

@@ -25,8 +25,14 @@ MIN_SIDE = 64
 # as they are, then a refinement pass on frames enlarged by DEFAULT_REFINE_SCALE, started from the first
 # pass's flow, so that RAFT's 1/8-resolution grid is finer relative to the camera's pixels (the flow is shrunk
 # back).  On enlarged frames alone, RAFT fails on the largest motions; started from the first pass it does not.
+# The refinement scale adapts to the motion: DEFAULT_REFINE_SCALE, lowered (to DEFAULT_REFINE_MIN_SCALE at the
+# least) so that the first pass's largest motions (its 99th-percentile flow), enlarged, stay within
+# DEFAULT_REFINE_MAX_FLOW pixels: small motions (far from the wall) gain from a finer grid, while the largest
+# enlarged motions go beyond what training showed (zoomed at most ×2) and fail.
 DEFAULT_INPUT_SCALE = 1.0
-DEFAULT_REFINE_SCALE = 2.0
+DEFAULT_REFINE_SCALE = 2.5
+DEFAULT_REFINE_MIN_SCALE = 2.0
+DEFAULT_REFINE_MAX_FLOW = 64.0
 DEFAULT_REFINE_ITERS = 4
 # Whether the backend also runs the mirrored pair and averages (MODEL_CARD.md says why it is the default or not).
 DEFAULT_MIRROR_AVERAGE = False
@@ -82,9 +88,12 @@ class RaftBackend:
     ``input_scale**2`` times the compute; the default is the shipped weights' own, :data:`DEFAULT_INPUT_SCALE`),
     ``mirror_average`` (also run the left-right mirrored pair, in the same batch, and average the two
     flows: their errors are partly independent; about twice the compute), ``refine_scale`` (after the pass at
-    ``input_scale``, run a second pass on frames enlarged by this factor, started from the first pass's flow;
-    None or 0: one pass) with ``refine_iters`` iterations.  The defaults are the shipped weights' own:
-    :data:`DEFAULT_INPUT_SCALE`, :data:`DEFAULT_REFINE_SCALE`, :data:`DEFAULT_REFINE_ITERS`.
+    ``input_scale``, run a second pass on frames enlarged by up to this factor, started from the first pass's
+    flow; None or 0: one pass) with ``refine_iters`` iterations, at the scale :func:`refinement_scale` picks
+    between ``refine_min_scale`` and ``refine_scale`` so that the enlarged motion stays within
+    ``refine_max_flow`` pixels (0, or ``refine_min_scale`` ≥ ``refine_scale``: always ``refine_scale``).  The
+    defaults are the shipped weights' own: :data:`DEFAULT_INPUT_SCALE`, :data:`DEFAULT_REFINE_SCALE`,
+    :data:`DEFAULT_REFINE_MIN_SCALE`, :data:`DEFAULT_REFINE_MAX_FLOW`, :data:`DEFAULT_REFINE_ITERS`.
     """
 
     name = "raft"
@@ -95,7 +104,9 @@ class RaftBackend:
                  input_scale: float = DEFAULT_INPUT_SCALE,
                  mirror_average: bool = DEFAULT_MIRROR_AVERAGE,
                  refine_scale: float | None = DEFAULT_REFINE_SCALE,
-                 refine_iters: int = DEFAULT_REFINE_ITERS) -> None:
+                 refine_iters: int = DEFAULT_REFINE_ITERS,
+                 refine_min_scale: float = DEFAULT_REFINE_MIN_SCALE,
+                 refine_max_flow: float = DEFAULT_REFINE_MAX_FLOW) -> None:
         if num_threads is not None:
             torch.set_num_threads(int(num_threads))
         if iters < 0:
@@ -108,9 +119,16 @@ class RaftBackend:
         if refine_scale is not None and refine_scale != 0 and not (np.isfinite(refine_scale)
                                                                    and lo <= refine_scale <= hi):
             raise ValueError(f"refine_scale must be 0 (one pass) or within {lo:g}..{hi:g} (got {refine_scale})")
+        if not (np.isfinite(refine_min_scale) and lo <= refine_min_scale <= hi):
+            raise ValueError(f"refine_min_scale must be within {lo:g}..{hi:g} (got {refine_min_scale})")
+        if not (np.isfinite(refine_max_flow) and refine_max_flow >= 0):
+            raise ValueError(f"refine_max_flow must be 0 (a fixed refine_scale) or a positive number of pixels "
+                             f"(got {refine_max_flow})")
         self.input_scale = float(input_scale)
         self.refine_scale = float(refine_scale) if refine_scale else None
         self.refine_iters = int(refine_iters)
+        self.refine_min_scale = float(refine_min_scale)
+        self.refine_max_flow = float(refine_max_flow)
         self.mirror_average = bool(mirror_average)
         self.iters = int(iters)
         self.warm_start = bool(warm_start)
@@ -165,7 +183,8 @@ class RaftBackend:
                                   input_scale=self.input_scale, flow_init=init, previous_low=previous,
                                   padding_mode=self.padding_mode, device=self._device,
                                   mirror_average=self.mirror_average, refine_scale=self.refine_scale,
-                                  refine_iters=self.refine_iters)
+                                  refine_iters=self.refine_iters, refine_min_scale=self.refine_min_scale,
+                                  refine_max_flow=self.refine_max_flow)
         if self.warm_start:
             self._previous_low = low
         return flow
@@ -175,19 +194,33 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, i
                   flow_init: np.ndarray | None = None, previous_low: torch.Tensor | None = None,
                   padding_mode: str = "sintel", device: torch.device | str = "cpu",
                   mirror_average: bool = False, refine_scale: float | None = None,
-                  refine_iters: int = DEFAULT_REFINE_ITERS) -> tuple[np.ndarray, torch.Tensor]:
+                  refine_iters: int = DEFAULT_REFINE_ITERS, refine_min_scale: float = DEFAULT_REFINE_MIN_SCALE,
+                  refine_max_flow: float = 0.0) -> tuple[np.ndarray, torch.Tensor]:
     """(H×W×2 float32 flow, 1/8-resolution flow of the first pass) of ``model`` for one pair of H×W×3 frames.
 
     With ``refine_scale``, the first pass's flow starts a second pass of ``refine_iters`` iterations on the
-    frames enlarged by ``refine_scale``, whose flow is returned (the 1/8-resolution flow returned stays the
-    first pass's, on the grid that ``previous_low`` is matched against).
+    frames enlarged by :func:`refinement_scale` (``refine_scale`` when ``refine_max_flow`` is 0), whose flow is
+    returned (the 1/8-resolution flow returned stays the first pass's, on the grid that ``previous_low`` is
+    matched against).
     """
     flow, low = _one_pass(model, img1, img2, iters, input_scale, flow_init, previous_low, padding_mode, device,
                           mirror_average)
     if refine_scale:
-        flow, _ = _one_pass(model, img1, img2, refine_iters, refine_scale, flow, None, padding_mode, device,
+        scale = refinement_scale(flow, refine_scale, refine_min_scale, refine_max_flow)
+        flow, _ = _one_pass(model, img1, img2, refine_iters, scale, flow, None, padding_mode, device,
                             mirror_average)
     return flow, low
+
+
+def refinement_scale(flow: np.ndarray, refine_scale: float, min_scale: float, max_flow: float) -> float:
+    """The refinement pass's input scale for a first-pass H×W×2 ``flow``: ``refine_scale``, lowered (not below
+    ``min_scale``) so that the flow's 99th-percentile length, enlarged, stays within ``max_flow`` pixels.
+
+    ``max_flow`` 0, or ``min_scale`` at or above ``refine_scale``, keeps ``refine_scale``."""
+    if not max_flow or min_scale >= refine_scale:
+        return float(refine_scale)
+    longest = float(np.percentile(np.hypot(flow[..., 0], flow[..., 1]), 99))
+    return float(np.clip(max_flow / max(longest, 1e-6), min_scale, refine_scale))
 
 
 def _one_pass(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float,
