@@ -45,6 +45,10 @@ DLL_STOP_MOTORS = (5, 6)
 # sticks and are never excepted.
 LOSS_EXCEPTION_BIT = {FlightMode.AUTO_MISSION: 1, FlightMode.AUTO_LOITER: 2, FlightMode.AUTO_TAKEOFF: 2,
                       FlightMode.AUTO_LAND: 2, FlightMode.AUTO_RTL: 2, FlightMode.OFFBOARD: 4}
+# PX4 ranks failsafe actions so that of two at once the worse wins: Hold < Return < Land
+FAILSAFE_SEVERITY = {FlightMode.AUTO_LOITER: 0, FlightMode.AUTO_RTL: 1, FlightMode.AUTO_LAND: 2}
+# COM_FAIL_ACT_T at or below this acts at once, as PX4 does
+FAIL_ACT_T_MIN = 0.1
 # PX4 refuses to arm in Position or Altitude mode with the throttle stick above this (0.5 = centre), and in
 # Stabilized or Manual mode unless the throttle is low
 ARM_THROTTLE_MAX = 0.6
@@ -119,6 +123,8 @@ class Commander:
         self._gcs_time: float | None = None  # last ground-station heartbeat (None: never connected)
         self._gcs_lost = False
         self._gcs_failsafe_done = False  # the data-link failsafe acted on this loss already
+        # a link-loss action waiting out COM_FAIL_ACT_T in Hold: (the mode it switches to, when)
+        self._delayed_failsafe: tuple[FlightMode, float] | None = None
         self._rtl_leg: str | None = None
         self._rtl_start_xy = (0.0, 0.0)
         self._rtl_z = 0.0
@@ -154,6 +160,7 @@ class Commander:
         self._has_flown = False
         self._landed_since = status.time_s if status.landed else None
         self.failsafe = False
+        self._delayed_failsafe = None
         self._manual_lost_at_arming = self._manual_lost
         self._manual_failsafe_done = self._gcs_failsafe_done = False
         self._enter(self.mode, status)
@@ -184,6 +191,7 @@ class Commander:
                                 f"Switching to {mode.label} is currently not possible: no manual control input "
                                 "(send MANUAL_CONTROL)")
         self.failsafe = False
+        self._delayed_failsafe = None  # a mode the pilot chose ends a failsafe's delay: PX4's takeover
         self._enter(mode, status)
         return ACCEPTED
 
@@ -196,12 +204,14 @@ class Commander:
             return self._refuse(mavlink.MAV_RESULT_DENIED,
                                 f"Takeoff denied: altitude {altitude_above_home:.2f} m is not above home")
         x, y, _ = status.position
+        self._delayed_failsafe = None
         self._takeoff_target = (x, y, self.home[2] - altitude_above_home)
         self._enter(FlightMode.AUTO_TAKEOFF, status)
         self._say(mavlink.MAV_SEVERITY_INFO, f"Takeoff to {altitude_above_home:.1f} m above home")
         return ACCEPTED
 
     def land(self, status: VehicleStatus) -> Reply:
+        self._delayed_failsafe = None
         self._enter(FlightMode.AUTO_LAND, status)
         return ACCEPTED
 
@@ -211,6 +221,7 @@ class Commander:
         if not self.armed or status.landed:
             return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Return denied: not flying")
         self.failsafe = False
+        self._delayed_failsafe = None
         self._enter(FlightMode.AUTO_RTL, status)
         return ACCEPTED
 
@@ -289,6 +300,8 @@ class Commander:
         if self._gcs_lost and self.armed and not status.landed and not (
                 self._gcs_failsafe_done or self.mode is FlightMode.AUTO_LAND or self._loss_excepted("COM_DLL_EXCEPT")):
             self._data_link_failsafe(status)
+        if self._delayed_failsafe is not None and self.armed and now >= self._delayed_failsafe[1]:
+            self._delayed_failsafe_due(status)
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
             if abs(status.position[2] - self._takeoff_target[2]) <= self.params["NAV_ACC_RAD"]:
                 self._say(mavlink.MAV_SEVERITY_INFO, "Takeoff complete: holding")
@@ -550,7 +563,7 @@ class Commander:
         self._manual_failsafe_done = True
         action = int(self.params["NAV_RCL_ACT"])
         self._fail_safe("manual control", None if action in DLL_STOP_MOTORS
-                        else DLL_ACTIONS.get(action, FlightMode.AUTO_LOITER), status)
+                        else DLL_ACTIONS.get(action, FlightMode.AUTO_LOITER), status, delayed=True)
 
     def _data_link_failsafe(self, status: VehicleStatus) -> None:
         """PX4's data-link-loss failsafe (NAV_DLL_ACT): once a ground station had connected, once per loss, in
@@ -558,23 +571,56 @@ class Commander:
         self._gcs_failsafe_done = True
         action = int(self.params["NAV_DLL_ACT"])
         if action in DLL_ACTIONS or action in DLL_STOP_MOTORS:
-            self._fail_safe("data link", None if action in DLL_STOP_MOTORS else DLL_ACTIONS[action], status)
+            self._fail_safe("data link", None if action in DLL_STOP_MOTORS else DLL_ACTIONS[action], status,
+                            delayed=True)
 
-    def _fail_safe(self, lost: str, target: FlightMode | None, status: VehicleStatus) -> None:
+    def _fail_safe(self, lost: str, target: FlightMode | None, status: VehicleStatus,
+                   delayed: bool = False) -> None:
         """Act on the loss of ``lost``: switch to ``target`` (Hold instead of Return on the ground), or stop
         the motors when ``target`` is None. Already in ``target``, or landing when ``target`` is Return, the
-        vehicle carries on (PX4 does not restart a Return, nor turn a landing into one)."""
+        vehicle carries on (PX4 does not restart a Return, nor turn a landing into one).
+
+        ``delayed`` (the link losses): as PX4 does, the vehicle first holds for COM_FAIL_ACT_T, so that the
+        pilot can choose a mode instead, then switches; a loss during that delay keeps its deadline and the
+        worse action. Stopping the motors never waits."""
         self.failsafe = True
         if target is None:
+            self._delayed_failsafe = None
             self._disarm(f"Failsafe: {lost} lost, motors stopped")
             return
         if target is FlightMode.AUTO_RTL and status.landed:
             target = FlightMode.AUTO_LOITER
+        pending = self._delayed_failsafe
+        if pending is not None:
+            worse = max(target, pending[0], key=FAILSAFE_SEVERITY.__getitem__)
+            self._delayed_failsafe = (worse, pending[1])
+            self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {worse.label} in "
+                                                     f"{max(pending[1] - status.time_s, 0.0):.0f} s")
+            return
         if target is self.mode or (target is FlightMode.AUTO_RTL and self.mode is FlightMode.AUTO_LAND):
             self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, continuing {self.mode.label}")
             return
+        wait = self.params["COM_FAIL_ACT_T"] if delayed else 0.0
+        if wait > FAIL_ACT_T_MIN and target is not FlightMode.AUTO_LOITER:
+            self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {target.label} in "
+                                                     f"{wait:.0f} s (Hold until then)")
+            self._delayed_failsafe = (target, status.time_s + wait)
+            if self.mode is not FlightMode.AUTO_LOITER:
+                self._enter(FlightMode.AUTO_LOITER, status)
+            return
         self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {target.label}")
         self._enter(target, status)
+
+    def _delayed_failsafe_due(self, status: VehicleStatus) -> None:
+        """COM_FAIL_ACT_T is over and no mode was chosen meanwhile: the failsafe's action, even if the link
+        came back meanwhile (PX4 clears a Return or a Land only on a mode change)."""
+        target, _ = self._delayed_failsafe
+        self._delayed_failsafe = None
+        if target is FlightMode.AUTO_RTL and status.landed:
+            target = FlightMode.AUTO_LOITER
+        if target is not self.mode:
+            self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: switching to {target.label}")
+            self._enter(target, status)
 
     def _offboard_alive(self, now: float) -> bool:
         return now - self._offboard_time <= self.params["COM_OF_LOSS_T"]
@@ -605,6 +651,7 @@ class Commander:
 
     def _disarm(self, text: str) -> None:
         self.armed = False
+        self._delayed_failsafe = None
         self._has_flown = False
         self._landed_since = None
         self._say(mavlink.MAV_SEVERITY_INFO, text)

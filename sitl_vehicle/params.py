@@ -106,6 +106,9 @@ COMMANDER_PARAMS = [
               "others: Hold"),
     ParamSpec("COM_RCL_EXCEPT", 0.0, 0.0, 7.0, "bitmask", "Modes where manual control loss is only reported: "
               "1 Mission, 2 Hold/Takeoff/Land/Return, 4 Offboard (the stick modes always act on it)"),
+    ParamSpec("COM_FAIL_ACT_T", 5.0, 0.0, 25.0, "s", "Manual control or data link lost: hold this long before "
+              "the failsafe action, for the pilot to choose a mode instead (<= 0.1: act at once; stopping the "
+              "motors and offboard loss never wait)"),
     ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 1.0, "-", "Stick dead zone of the stick modes"),
     ParamSpec("MPC_XY_MAN_EXPO", 0.6, 0.0, 1.0, "-", "Horizontal stick expo (0 linear, 1 cubic)"),
     ParamSpec("MPC_Z_MAN_EXPO", 0.6, 0.0, 1.0, "-", "Throttle stick expo (0 linear, 1 cubic)"),

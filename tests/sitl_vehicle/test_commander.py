@@ -157,6 +157,7 @@ def test_return_from_above_the_return_altitude_keeps_it_and_never_climbs_to_desc
                                           (3.0, FlightMode.AUTO_LAND)])
 def test_data_link_loss_failsafe_after_com_dl_loss_t(commander, action, mode):
     commander.params.set("NAV_DLL_ACT", action)
+    commander.params.set("COM_FAIL_ACT_T", 0.0)                         # act at once (the delay: below)
     commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
     commander.offboard_setpoint(Setpoint(position=(1.0, 0.0, -2.0)), 0.5)
     commander.set_mode(FlightMode.OFFBOARD, at(0.5, 0.0, 0.0, 0.0, landed=True))
@@ -172,6 +173,34 @@ def test_data_link_loss_failsafe_after_com_dl_loss_t(commander, action, mode):
     commander.gcs_heartbeat(12.0)
     assert commander.messages[-1][1] == "Data link regained"
     assert commander.update(at(12.1, 1.0, 0.0, -2.0)).mode is mode      # PX4 stays in the failsafe mode
+
+
+def test_data_link_loss_holds_com_fail_act_t_first_and_the_worse_of_two_losses_wins(commander):
+    from sitl_vehicle.manual import Sticks
+
+    commander.params.set("NAV_DLL_ACT", 2.0)                            # Return
+    commander.params.set("NAV_RCL_ACT", 3.0)                            # Land
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.gcs_heartbeat(0.0)
+    commander.set_mode(FlightMode.AUTO_LOITER, at(0.0, 0.0, 0.0, -2.0))
+    out = commander.update(at(10.5, 0.0, 0.0, -2.0))                   # data link lost: Return in 5 s
+    assert out.mode is FlightMode.AUTO_LOITER and commander.failsafe
+    assert commander.messages[-1][1] == "Failsafe: data link lost, switching to Return in 5 s (Hold until then)"
+    commander.manual_control(Sticks(), 11.0)                            # sticks heard, then silent: Land is worse
+    out = commander.update(at(12.0, 0.0, 0.0, -2.0))
+    assert out.mode is FlightMode.AUTO_LOITER
+    assert commander.messages[-1][1] == "Failsafe: manual control lost, switching to Land in 4 s"
+    assert commander.update(at(15.4, 0.0, 0.0, -2.0)).mode is FlightMode.AUTO_LOITER
+    assert commander.update(at(15.6, 0.0, 0.0, -2.0)).mode is FlightMode.AUTO_LAND   # the first deadline
+    assert commander.messages[-1][1] == "Failsafe: switching to Land"
+
+
+def test_offboard_loss_does_not_wait_com_fail_act_t(commander):
+    commander.params.set("COM_OBL_RC_ACT", 3.0)                         # Return
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.offboard_setpoint(Setpoint(position=(1.0, 0.0, -2.0)), 0.5)
+    commander.set_mode(FlightMode.OFFBOARD, at(0.5, 0.0, 0.0, 0.0, landed=True))
+    assert commander.update(at(2.0, 1.0, 0.0, -2.0)).mode is FlightMode.AUTO_RTL  # PX4: a mode fallback
 
 
 def test_data_link_loss_is_only_reported_when_disabled_never_connected_or_landed(commander):
@@ -201,6 +230,7 @@ def test_data_link_loss_never_acts_in_land_nor_in_modes_com_dll_except_excepts(c
 
     excepted = Commander(ParameterStore(COMMANDER_PARAMS))
     excepted.params.set("NAV_DLL_ACT", 3.0)                             # Land
+    excepted.params.set("COM_FAIL_ACT_T", 0.0)
     excepted.params.set("COM_DLL_EXCEPT", 4.0)                          # but not in Offboard
     excepted.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
     excepted.gcs_heartbeat(0.0)

@@ -151,11 +151,13 @@ def test_manual_control_loss_fails_safe_as_nav_rcl_act_says(commander, action, m
     airborne_in(commander, FlightMode.POSCTL)
     out = commander.update(flying(1.4))  # 0.4 s of silence: within COM_RC_LOSS_T
     assert out.mode is FlightMode.POSCTL and not commander.failsafe
-    out = commander.update(flying(1.6))
-    assert out.mode is mode and commander.failsafe and out.armed
+    out = commander.update(flying(1.6))  # lost: Hold first, for COM_FAIL_ACT_T (5 s)
+    assert out.mode is FlightMode.AUTO_LOITER and commander.failsafe and out.armed
     texts = [t for _, t in commander.messages]
     assert "Manual control lost" in texts and any(f"switching to {mode.label}" in t for t in texts)
-    commander.manual_control(CENTRED, 2.0)
+    assert commander.update(flying(6.5)).mode is FlightMode.AUTO_LOITER
+    assert commander.update(flying(6.7)).mode is mode and commander.failsafe
+    commander.manual_control(CENTRED, 7.0)
     assert commander.messages[-1][1] == "Manual control regained"
 
 
@@ -174,6 +176,7 @@ def _hold_with_sticks_then_silent(commander, t_lost=2.0):
 
 
 def test_manual_control_loss_acts_in_every_mode_com_rcl_except_does_not_except(commander):
+    commander.params.set("COM_FAIL_ACT_T", 0.0)                  # act at once (the delay has its own tests)
     out = _hold_with_sticks_then_silent(commander)              # PX4 acts in Hold too (COM_RCL_EXCEPT 0)
     assert out.mode is FlightMode.AUTO_RTL and commander.failsafe
     texts = [t for _, t in commander.messages]
@@ -183,6 +186,7 @@ def test_manual_control_loss_acts_in_every_mode_com_rcl_except_does_not_except(c
     assert commander.update(flying(3.0)).mode is FlightMode.AUTO_LOITER
 
     excepted = Commander(ParameterStore(COMMANDER_PARAMS))
+    excepted.params.set("COM_FAIL_ACT_T", 0.0)
     excepted.params.set("COM_RCL_EXCEPT", 2.0)                   # Hold and the other auto modes
     out = _hold_with_sticks_then_silent(excepted)
     assert out.mode is FlightMode.AUTO_LOITER and not excepted.failsafe
@@ -195,6 +199,7 @@ def test_manual_control_loss_acts_in_every_mode_com_rcl_except_does_not_except(c
 
 
 def test_manual_control_loss_is_ignored_when_armed_without_sticks_until_they_return(commander):
+    commander.params.set("COM_FAIL_ACT_T", 0.0)                  # act at once
     commander.manual_control(CENTRED, 0.0)
     commander.update(status(1.0))                                # lost before arming
     assert commander.messages[-1][1] == "Manual control lost"
@@ -208,6 +213,36 @@ def test_manual_control_loss_is_ignored_when_armed_without_sticks_until_they_ret
     never.arm(status())
     assert never.update(flying(60.0)).mode is FlightMode.AUTO_LOITER and not never.messages[-1][1].startswith(
         "Manual control")
+
+
+def test_a_link_loss_failsafe_holds_com_fail_act_t_first_and_a_mode_choice_meanwhile_ends_it(commander):
+    airborne_in(commander, FlightMode.POSCTL)
+    commander.params.set("COM_FAIL_ACT_T", 3.0)
+    out = commander.update(flying(2.0))                          # NAV_RCL_ACT 2: Return, in 3 s
+    assert out.mode is FlightMode.AUTO_LOITER and commander.failsafe
+    assert commander.messages[-1][1] == "Failsafe: manual control lost, switching to Return in 3 s (Hold until then)"
+    commander.manual_control(CENTRED, 3.0)                       # back before the deadline: PX4 still returns
+    assert commander.update(flying(4.9)).mode is FlightMode.AUTO_LOITER
+    assert commander.update(flying(5.0)).mode is FlightMode.AUTO_RTL
+    assert commander.messages[-1][1].startswith("Return: flying home")
+    assert any(t == "Failsafe: switching to Return" for _, t in commander.messages)
+
+    pilot = airborne_in(Commander(ParameterStore(COMMANDER_PARAMS)), FlightMode.POSCTL)
+    pilot.update(flying(2.0))                                    # lost: Hold, Return in 5 s
+    pilot.manual_control(CENTRED, 2.5)
+    assert pilot.set_mode(FlightMode.POSCTL, flying(2.5)).accepted   # the pilot takes over by choosing a mode
+    for t in (2.6, 7.5, 10.0):
+        pilot.manual_control(CENTRED, t)
+        assert pilot.update(flying(t)).mode is FlightMode.POSCTL and not pilot.failsafe
+
+
+def test_stopping_the_motors_and_a_zero_delay_do_not_wait(commander):
+    commander.params.set("NAV_RCL_ACT", 5.0)                     # terminate: at once, whatever COM_FAIL_ACT_T
+    airborne_in(commander, FlightMode.POSCTL)
+    assert not commander.update(flying(2.0)).armed
+    at_once = airborne_in(Commander(ParameterStore(COMMANDER_PARAMS)), FlightMode.POSCTL)
+    at_once.params.set("COM_FAIL_ACT_T", 0.1)                    # PX4: 0.1 s or less is no delay
+    assert at_once.update(flying(2.0)).mode is FlightMode.AUTO_RTL
 
 
 @pytest.mark.parametrize("mode", [FlightMode.AUTO_LAND, FlightMode.AUTO_RTL])
