@@ -49,6 +49,13 @@ LOSS_EXCEPTION_BIT = {FlightMode.AUTO_MISSION: 1, FlightMode.AUTO_LOITER: 2, Fli
 FAILSAFE_SEVERITY = {FlightMode.AUTO_LOITER: 0, FlightMode.AUTO_RTL: 1, FlightMode.AUTO_LAND: 2}
 # COM_FAIL_ACT_T at or below this acts at once, as PX4 does
 FAIL_ACT_T_MIN = 0.1
+# COM_RC_OVERRIDE bits: moving the sticks takes over (switches to Position) in the auto modes, in Offboard
+RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD = 1, 2
+AUTO_MODES = (FlightMode.AUTO_MISSION, FlightMode.AUTO_LOITER, FlightMode.AUTO_TAKEOFF, FlightMode.AUTO_LAND,
+              FlightMode.AUTO_RTL)
+# the sticks "move" when an axis (throttle counted double: its range is half) changed by COM_RC_STICK_OV
+# within this window: a quick push, not a slow drift or jitter (PX4 thresholds a smoothed stick rate)
+STICK_MOVE_WINDOW_S = 1.0
 # PX4 refuses to arm in Position or Altitude mode with the throttle stick above this (0.5 = centre), and in
 # Stabilized or Manual mode unless the throttle is low
 ARM_THROTTLE_MAX = 0.6
@@ -125,12 +132,15 @@ class Commander:
         self._gcs_failsafe_done = False  # the data-link failsafe acted on this loss already
         # a link-loss action waiting out COM_FAIL_ACT_T in Hold: (the mode it switches to, when)
         self._delayed_failsafe: tuple[FlightMode, float] | None = None
+        self._failsafe_stick_takeover = False  # whether moving the sticks may end the current failsafe
         self._rtl_leg: str | None = None
         self._rtl_start_xy = (0.0, 0.0)
         self._rtl_z = 0.0
         self._rtl_loiter_since = 0.0
         self._sticks: Sticks | None = None
         self._sticks_time = -math.inf
+        self._recent_sticks: deque[tuple[float, Sticks]] = deque()  # the last STICK_MOVE_WINDOW_S of input
+        self._sticks_moved = False  # moved since the last update: a takeover request
         self._manual_lost = False
         self._manual_lost_at_arming = False  # armed without sticks: their loss is ignored until they return
         self._manual_failsafe_done = False  # the manual-control failsafe acted on this loss already
@@ -275,6 +285,7 @@ class Commander:
         """Stick input arrived (MANUAL_CONTROL; the MAVLink edge has already rejected malformed ones)."""
         self._sticks = sticks
         self._sticks_time = time_s
+        self._note_stick_movement(sticks, time_s)
         if self._manual_lost:
             self._manual_lost = self._manual_lost_at_arming = self._manual_failsafe_done = False
             self._say(mavlink.MAV_SEVERITY_INFO, "Manual control regained")
@@ -302,6 +313,13 @@ class Commander:
             self._data_link_failsafe(status)
         if self._delayed_failsafe is not None and self.armed and now >= self._delayed_failsafe[1]:
             self._delayed_failsafe_due(status)
+        if self._sticks_moved:
+            self._sticks_moved = False
+            if self.armed and self._manual_alive(now) and self._stick_takeover_allowed():
+                self._say(mavlink.MAV_SEVERITY_INFO, f"Sticks moved: pilot takes over from {self.mode.label}, "
+                                                     "switching to Position")
+                self.failsafe = False
+                self._enter(FlightMode.POSCTL, status)
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
             if abs(status.position[2] - self._takeoff_target[2]) <= self.params["NAV_ACC_RAD"]:
                 self._say(mavlink.MAV_SEVERITY_INFO, "Takeoff complete: holding")
@@ -553,6 +571,31 @@ class Commander:
             action, FlightMode.AUTO_LOITER)
         self._fail_safe("offboard", target, status)
 
+    def _note_stick_movement(self, sticks: Sticks, time_s: float) -> None:
+        """Flag a takeover request when an axis moved by COM_RC_STICK_OV (percent of its range) within
+        STICK_MOVE_WINDOW_S."""
+        recent = self._recent_sticks
+        while recent and time_s - recent[0][0] > STICK_MOVE_WINDOW_S:
+            recent.popleft()
+        threshold = 0.01 * self.params["COM_RC_STICK_OV"]
+        for _, old in recent:
+            if max(abs(sticks.pitch - old.pitch), abs(sticks.roll - old.roll), abs(sticks.yaw - old.yaw),
+                   2.0 * abs(sticks.throttle - old.throttle)) > threshold:
+                self._sticks_moved = True
+                recent.clear()  # one push, one request
+                break
+        recent.append((time_s, sticks))
+
+    def _stick_takeover_allowed(self) -> bool:
+        """PX4's stick takeover: in the auto modes or Offboard as COM_RC_OVERRIDE allows, and from a failsafe's
+        Hold, Return or Land: offboard loss's at once, a link loss's once its COM_FAIL_ACT_T delay is over
+        (during it, only a mode choice takes over; with no delay configured, never)."""
+        if self.failsafe and self.mode in (FlightMode.AUTO_LOITER, FlightMode.AUTO_RTL, FlightMode.AUTO_LAND):
+            return self._delayed_failsafe is None and self._failsafe_stick_takeover
+        bits = int(self.params["COM_RC_OVERRIDE"])
+        return bool((bits & RC_OVERRIDE_AUTO and self.mode in AUTO_MODES)
+                    or (bits & RC_OVERRIDE_OFFBOARD and self.mode is FlightMode.OFFBOARD))
+
     def _loss_excepted(self, param: str) -> bool:
         """Whether the link-loss exception mask ``param`` (COM_RCL_EXCEPT, COM_DLL_EXCEPT) covers this mode."""
         return bool(int(self.params[param]) & LOSS_EXCEPTION_BIT.get(self.mode, 0))
@@ -584,6 +627,7 @@ class Commander:
         pilot can choose a mode instead, then switches; a loss during that delay keeps its deadline and the
         worse action. Stopping the motors never waits."""
         self.failsafe = True
+        self._failsafe_stick_takeover = not delayed or self.params["COM_FAIL_ACT_T"] > FAIL_ACT_T_MIN
         if target is None:
             self._delayed_failsafe = None
             self._disarm(f"Failsafe: {lost} lost, motors stopped")

@@ -109,6 +109,10 @@ COMMANDER_PARAMS = [
     ParamSpec("COM_FAIL_ACT_T", 5.0, 0.0, 25.0, "s", "Manual control or data link lost: hold this long before "
               "the failsafe action, for the pilot to choose a mode instead (<= 0.1: act at once; stopping the "
               "motors and offboard loss never wait)"),
+    ParamSpec("COM_RC_OVERRIDE", 1.0, 0.0, 3.0, "bitmask", "Moving the sticks switches to Position mode in: "
+              "1 the auto modes (Hold, Takeoff, Land, Return, Mission), 2 Offboard"),
+    ParamSpec("COM_RC_STICK_OV", 30.0, 5.0, 80.0, "%", "How far a stick must move (within 1 s) to take over "
+              "(throttle counts double)"),
     ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 1.0, "-", "Stick dead zone of the stick modes"),
     ParamSpec("MPC_XY_MAN_EXPO", 0.6, 0.0, 1.0, "-", "Horizontal stick expo (0 linear, 1 cubic)"),
     ParamSpec("MPC_Z_MAN_EXPO", 0.6, 0.0, 1.0, "-", "Throttle stick expo (0 linear, 1 cubic)"),

@@ -245,6 +245,73 @@ def test_stopping_the_motors_and_a_zero_delay_do_not_wait(commander):
     assert at_once.update(flying(2.0)).mode is FlightMode.AUTO_RTL
 
 
+def _stream(commander, samples, t0, dt=0.05):
+    """Send each of ``samples`` (Sticks) ``dt`` apart from ``t0``, updating the commander after each; the modes."""
+    modes = []
+    for i, sticks in enumerate(samples):
+        t = t0 + i * dt
+        commander.manual_control(sticks, t)
+        modes.append(commander.update(flying(t)).mode)
+    return modes
+
+
+def test_moving_the_sticks_in_an_auto_mode_takes_over_into_position_mode(commander):
+    commander.manual_control(CENTRED, 0.0)
+    assert commander.arm(status()).accepted                      # Hold, sticks centred
+    drift = [Sticks(pitch=0.004 * i) for i in range(60)]         # 0.24 in 3 s: slow, no takeover
+    jitter = [Sticks(roll=0.05 * (-1) ** i) for i in range(20)]
+    assert set(_stream(commander, drift + jitter, 0.1)) == {FlightMode.AUTO_LOITER}
+    push = [Sticks(), Sticks(pitch=0.2), Sticks(pitch=0.4)]      # 40 % in 0.1 s (COM_RC_STICK_OV 30 %)
+    assert _stream(commander, push, 5.0)[-1] is FlightMode.POSCTL
+    assert commander.messages[-1][1] == "Sticks moved: pilot takes over from Hold, switching to Position"
+
+
+def test_offboard_is_taken_over_by_the_sticks_only_when_com_rc_override_says_so():
+    from sitl_vehicle.sim import Setpoint
+
+    for bits, taken_over in ((1.0, False), (3.0, True)):
+        commander = Commander(ParameterStore(COMMANDER_PARAMS))
+        commander.params.set("COM_RC_OVERRIDE", bits)
+        commander.manual_control(CENTRED, 0.0)
+        commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 0.0)
+        assert commander.set_mode(FlightMode.OFFBOARD, status()).accepted and commander.arm(status()).accepted
+        commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 0.1)
+        mode = _stream(commander, [CENTRED, Sticks(throttle=0.8)], 0.1)[-1]   # throttle counts double: 60 %
+        assert (mode is FlightMode.POSCTL) is taken_over
+
+
+def test_the_sticks_take_over_from_a_failsafe_only_after_its_delay(commander):
+    commander.params.set("NAV_DLL_ACT", 2.0)                     # data link lost: Return, after 5 s in Hold
+    commander.manual_control(CENTRED, 0.0)
+    commander.gcs_heartbeat(0.0)
+    assert commander.arm(status()).accepted
+    _stream(commander, [CENTRED] * 3, 10.0)
+    assert commander.update(flying(10.2)).mode is FlightMode.AUTO_LOITER and commander.failsafe   # COM_DL_LOSS_T
+    push = [CENTRED, Sticks(roll=-0.6)]
+    assert _stream(commander, push, 11.0)[-1] is FlightMode.AUTO_LOITER        # in the delay: no takeover
+    assert _stream(commander, [Sticks(roll=-0.6)] * 4, 15.1)[-1] is FlightMode.AUTO_RTL
+    assert _stream(commander, push, 16.0)[-1] is FlightMode.POSCTL and not commander.failsafe
+
+    at_once = Commander(ParameterStore(COMMANDER_PARAMS))        # COM_FAIL_ACT_T 0: PX4 allows a mode switch only
+    at_once.params.set("NAV_DLL_ACT", 2.0)
+    at_once.params.set("COM_FAIL_ACT_T", 0.0)
+    at_once.manual_control(CENTRED, 0.0)
+    at_once.gcs_heartbeat(0.0)
+    assert at_once.arm(status()).accepted
+    _stream(at_once, [CENTRED] * 6, 10.0)
+    assert _stream(at_once, push, 11.0)[-1] is FlightMode.AUTO_RTL
+
+    offboard = Commander(ParameterStore(COMMANDER_PARAMS))        # offboard loss: the sticks take over at once
+    offboard.params.set("COM_OBL_RC_ACT", 3.0)
+    offboard.params.set("COM_FAIL_ACT_T", 0.0)
+    from sitl_vehicle.sim import Setpoint
+    offboard.manual_control(CENTRED, 0.0)
+    offboard.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 0.0)
+    assert offboard.set_mode(FlightMode.OFFBOARD, status()).accepted and offboard.arm(status()).accepted
+    assert _stream(offboard, [CENTRED] * 3, 2.0)[-1] is FlightMode.AUTO_RTL and offboard.failsafe
+    assert _stream(offboard, push, 3.0)[-1] is FlightMode.POSCTL
+
+
 @pytest.mark.parametrize("mode", [FlightMode.AUTO_LAND, FlightMode.AUTO_RTL])
 def test_manual_control_loss_does_not_turn_a_landing_or_a_return_into_a_new_return(commander, mode):
     commander.manual_control(CENTRED, 0.0)

@@ -121,6 +121,7 @@ def test_mavsdk_manual_control_position_and_altitude_modes(px4_system):
         sticks[0] = 0.5  # forward tilt: Altitude mode accelerates north
         wait_for(lambda: server.sim.truth.velocity[0] > 0.5, 10, "forward flight in Altitude mode")
         sticks[0] = 0.0
+        time.sleep(1.2)  # as on PX4, a stick still moving when Land starts would take over (COM_RC_OVERRIDE)
         action.land()
         wait_for(lambda: not telemetry.armed(), 40, "landing and auto-disarm")
         assert not server.sim.crashed
