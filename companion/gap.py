@@ -142,8 +142,9 @@ class ParallaxGapConfig:
     border_penalty: float = 0.5       # a component touching the image border counts this much of its area
     border_min_frac: float = 0.02     # ... and needs at least this fraction of the image (flow is poor there)
     border_px: int = 6                # flow this close to the image edge is not trusted (inpainted)
-    max_border_frac: float = 0.5      # a gap is a hole in a nearer surface: at most this much of its outline
-                                      # may run along the image border (rejects "the whole wall beyond the floor")
+    max_border_frac: float = 0.4      # a gap is a hole in a nearer surface: at most this much of its outline
+                                      # may run along the image border (rejects "the whole wall beyond the floor"
+                                      # and the far band beyond a wall's top edge seen from afar)
     min_flow_px: float = 0.05         # below this median |flow| there is no parallax to read
 
 

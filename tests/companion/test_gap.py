@@ -102,6 +102,19 @@ def test_parallax_detector_sees_no_gap_on_wall_and_floor():
     assert iou(detect_gap_parallax(flow2).mask, truth) >= 0.95
 
 
+def test_parallax_detector_ignores_a_far_band_along_the_frame_edge():
+    # Seen from 4 m, what lies beyond a wall's top edge is far too, but it is no opening: a band along the
+    # frame's top edge (135×22 px, 43 % of its outline on the border; flights locked onto one like it)
+    band = [(145, 0), (280, 0), (280, 22), (145, 22)]
+    flow, band_mask = translation_flow(H, W, (0.1, 0.0, 1.0), band)
+    res = detect_gap_parallax(flow)
+    assert not res.found and "enclosed" in res.reason
+    # ... while a hole in the wall below it is found
+    hole, truth = translation_flow(H, W, (0.1, 0.0, 1.0), QUAD)
+    both = np.where(band_mask[..., None], flow, hole)
+    assert iou(detect_gap_parallax(both).mask, truth) >= 0.95
+
+
 def test_inverse_depth_is_step_over_depth():
     # ρ = |T|/Z: with the synthetic field's scale 0.3 and ρ_near 0.5, the wall reads 0.15 for a unit step
     from companion.gap import inverse_depth_from_flow
