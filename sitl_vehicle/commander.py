@@ -632,8 +632,7 @@ class Commander:
             self._delayed_failsafe = None
             self._disarm(f"Failsafe: {lost} lost, motors stopped")
             return
-        if target is FlightMode.AUTO_RTL and status.landed:
-            target = FlightMode.AUTO_LOITER
+        target = _hold_if_landed(target, status)
         pending = self._delayed_failsafe
         if pending is not None:
             worse = max(target, pending[0], key=FAILSAFE_SEVERITY.__getitem__)
@@ -658,10 +657,8 @@ class Commander:
     def _delayed_failsafe_due(self, status: VehicleStatus) -> None:
         """COM_FAIL_ACT_T is over and no mode was chosen meanwhile: the failsafe's action, even if the link
         came back meanwhile (PX4 clears a Return or a Land only on a mode change)."""
-        target, _ = self._delayed_failsafe
+        target = _hold_if_landed(self._delayed_failsafe[0], status)
         self._delayed_failsafe = None
-        if target is FlightMode.AUTO_RTL and status.landed:
-            target = FlightMode.AUTO_LOITER
         if target is not self.mode:
             self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: switching to {target.label}")
             self._enter(target, status)
@@ -707,6 +704,11 @@ class Commander:
     def _say(self, severity: int, text: str) -> None:
         log.info("%s", text)
         self.messages.append((severity, text))
+
+
+def _hold_if_landed(target: FlightMode, status: VehicleStatus) -> FlightMode:
+    """A failsafe's mode: Hold instead of Return on the ground (there is nothing to return from)."""
+    return FlightMode.AUTO_LOITER if target is FlightMode.AUTO_RTL and status.landed else target
 
 
 def _stopping_point(position, velocity, decel: float = 2.0) -> tuple[float, float, float]:

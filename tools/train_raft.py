@@ -46,6 +46,7 @@ from companion.flow.raft.backend import (
     DEFAULT_REFINE_SCALE,
     INPUT_SCALE_RANGE,
     estimate_flow,
+    refinement_is_adaptive,
 )
 from tools.raft_data import (
     DEFAULT_CROP,
@@ -149,7 +150,7 @@ def describe_inference(args: argparse.Namespace) -> str:
     """'input scale 1, refined at scale 2-2.5 (motion within 64 px, 4 iters)' and the like, for the one-line
     summaries."""
     text = f"input scale {args.input_scale:g}"
-    if args.refine_scale and args.refine_max_flow and args.refine_min_scale < args.refine_scale:
+    if refinement_is_adaptive(args.refine_scale, args.refine_min_scale, args.refine_max_flow):
         text += (f", refined at scale {args.refine_min_scale:g}-{args.refine_scale:g} (motion within "
                  f"{args.refine_max_flow:g} px, {args.refine_iters} iters)")
     elif args.refine_scale:

@@ -40,7 +40,9 @@ def _median_ms(fn, runs: int = RUNS) -> float:
 
 def _refine_scales(raft) -> str:
     """'2-2.5 (lowered for motion over 64 px)' for an adaptive refinement pass, '2' for a fixed one."""
-    if raft.refine_max_flow and raft.refine_min_scale < raft.refine_scale:
+    from companion.flow.raft.backend import refinement_is_adaptive
+
+    if refinement_is_adaptive(raft.refine_scale, raft.refine_min_scale, raft.refine_max_flow):
         return (f"{raft.refine_min_scale:g}-{raft.refine_scale:g} (lowered for motion over "
                 f"{raft.refine_max_flow:g} px)")
     return f"{raft.refine_scale:g}"

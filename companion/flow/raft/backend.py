@@ -212,12 +212,18 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, i
     return flow, low
 
 
+def refinement_is_adaptive(refine_scale: float | None, min_scale: float, max_flow: float) -> bool:
+    """Whether a refinement pass picks its scale per frame (:func:`refinement_scale`) rather than always
+    running at ``refine_scale``: it needs a ``max_flow`` and room between ``min_scale`` and ``refine_scale``."""
+    return bool(refine_scale and max_flow and min_scale < refine_scale)
+
+
 def refinement_scale(flow: np.ndarray, refine_scale: float, min_scale: float, max_flow: float) -> float:
     """The refinement pass's input scale for a first-pass H×W×2 ``flow``: ``refine_scale``, lowered (not below
     ``min_scale``) so that the flow's 99th-percentile length, enlarged, stays within ``max_flow`` pixels.
 
     ``max_flow`` 0, or ``min_scale`` at or above ``refine_scale``, keeps ``refine_scale``."""
-    if not max_flow or min_scale >= refine_scale:
+    if not refinement_is_adaptive(refine_scale, min_scale, max_flow):
         return float(refine_scale)
     longest = float(np.percentile(np.hypot(flow[..., 0], flow[..., 1]), 99))
     return float(np.clip(max_flow / max(longest, 1e-6), min_scale, refine_scale))
