@@ -5,13 +5,16 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import signal
 import sys
 import time
 from pathlib import Path
 
+from companion.clock import LockstepError
 from companion.gap import get_detector
 from companion.link import BACKENDS, LinkError, make_link, parse_endpoint
+from companion.lockstep import open_clock
 from companion.mission import Mission, MissionConfig, State
 from companion.runlog import RunLog
 
@@ -47,6 +50,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--render-backend", choices=["cpu", "torch"], default="cpu", help="splat renderer")
     p.add_argument("--altitude", type=float, default=1.5, help="takeoff altitude in metres (default 1.5)")
     p.add_argument("--finish", choices=["hold", "land"], default="hold", help="after the traversal (default hold)")
+    p.add_argument("--lockstep", action="store_true",
+                   help="run on the simulated vehicle's clock (flowgap-vehicle --lockstep): the vehicle advances "
+                        "only when this companion waits, so a flight repeats exactly at any machine load; the "
+                        "release travels on the --truth side channel, never on the MAVLink link")
+    p.add_argument("--latency", type=float, default=0.0, metavar="S",
+                   help="camera-to-setpoint latency in seconds: the next waypoint goes out this long after its "
+                        "frame, or when perception is done if later (in lockstep, what perception costs in "
+                        "simulated time; default 0)")
     p.add_argument("--run-dir", type=Path, help="run log directory (default runs/<time>)")
     p.add_argument("--no-images", action="store_true", help="do not save per-step PNGs (faster evaluations)")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
@@ -63,6 +74,11 @@ def make_flow(spec: str, raft_weights: Path | None):
     return make_flow_backend(name, **options)
 
 
+def _close(clock) -> None:
+    if clock is not None:
+        clock.close()
+
+
 def _interrupt(_signum, _frame) -> None:
     raise KeyboardInterrupt
 
@@ -71,6 +87,15 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=args.log_level, format="%(asctime)s companion %(levelname)s %(message)s")
     run_dir = args.run_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
+    if not (math.isfinite(args.latency) and args.latency >= 0):
+        print(f"flowgap-companion: error: --latency must be a number of seconds >= 0 (got {args.latency})",
+              file=sys.stderr)
+        return 2
+    if args.lockstep and args.link != "pymavlink":
+        print(f"flowgap-companion: error: --lockstep needs --link pymavlink: the {args.link} link cannot run "
+              f"in lockstep (mavsdk_server keeps its own wall-clock timers)", file=sys.stderr)
+        return 2
+    clock = None
     try:
         parse_endpoint(args.connect)
         parse_endpoint(args.truth)
@@ -78,22 +103,27 @@ def main(argv: list[str] | None = None) -> int:
         detector = get_detector(args.detector)
         from companion.camera import SplatCamera
 
-        camera = SplatCamera(args.scene, args.truth, backend=args.render_backend)
-    except (ValueError, KeyError, FileNotFoundError, OSError) as exc:
+        clock, poses = open_clock(args.truth, args.lockstep)
+        camera = SplatCamera(args.scene, poses, backend=args.render_backend)
+    except (ValueError, KeyError, FileNotFoundError, OSError, LockstepError) as exc:
         print(f"flowgap-companion: error: {exc}", file=sys.stderr)
+        _close(clock)
         return 2
     except Exception as exc:  # noqa: BLE001 — weights/scene errors from other packages: one line, not a traceback
         print(f"flowgap-companion: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        _close(clock)
         return 2
     runlog = RunLog(run_dir, images=not args.no_images)
     try:
-        link = make_link(args.connect, args.link, tlog_path=runlog.tlog_path)
+        link = make_link(args.connect, args.link, tlog_path=runlog.tlog_path, clock=clock)
     except (ValueError, LinkError, ImportError) as exc:
         print(f"flowgap-companion: error: {exc}", file=sys.stderr)
         camera.close()
+        clock.close()
         return 2
     mission = Mission(link, camera, flow, detector, runlog,
-                      config=MissionConfig(altitude_m=args.altitude, finish=args.finish))
+                      config=MissionConfig(altitude_m=args.altitude, finish=args.finish,
+                                           perception_latency_s=args.latency))
     signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops us with SIGTERM: end like Ctrl-C
     try:
         result = mission.run()
@@ -107,9 +137,10 @@ def main(argv: list[str] | None = None) -> int:
         result.reason = result.reason or "interrupted"
     finally:
         link.close()
+        clock.close()       # in lockstep: the vehicle's last second, to settle before its verdict
         camera.close()
     summary = {"scene": args.scene, "flow": args.flow, "detector": args.detector, "link": args.link,
-               **result.as_dict()}
+               "clock": clock.name, "latency_s": args.latency, **result.as_dict()}
     runlog.summary(summary)
     runlog.close()
     print(json.dumps({k: summary[k] for k in ("state", "reason", "servo_steps", "push_length_m")}))

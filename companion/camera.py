@@ -42,13 +42,23 @@ class CameraError(RuntimeError):
     """No frame could be produced (for the splat camera: no pose from the truth stream)."""
 
 
+class PoseSource(Protocol):
+    """Where the simulated camera learns the vehicle's true pose: ``latest() -> (time s, position, (w,x,y,z))``."""
+
+    def latest(self, timeout_s: float = 5.0) -> tuple[float, tuple, tuple]: ...
+
+    def close(self) -> None: ...
+
+
 class TruthPoseListener:
-    """Keeps the latest true pose from the vehicle's ODOMETRY truth stream (simulation only)."""
+    """Keeps the latest true pose from the vehicle's ODOMETRY truth stream (simulation only), in a thread
+    of its own (real time; in lockstep the clock reads the stream: :class:`companion.lockstep.LockstepChannel`)."""
 
     def __init__(self, url: str):
         endpoint = parse_endpoint(url)
         self._conn = mavutil.mavlink_connection(endpoint.mavutil, dialect="common")
         self._latest: tuple | None = None
+        self._lockstep_seen = False
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="truth-rx", daemon=True)
@@ -65,6 +75,11 @@ class TruthPoseListener:
             if msg is not None:
                 with self._lock:
                     self._latest = (msg.time_usec * 1e-6, (msg.x, msg.y, msg.z), tuple(msg.q))
+            elif not self._lockstep_seen:
+                from companion.lockstep import is_lockstep
+
+                word = self._conn.messages.get("DEBUG_VECT")
+                self._lockstep_seen = word is not None and is_lockstep(word)
 
     def latest(self, timeout_s: float = 5.0) -> tuple[float, tuple, tuple]:
         deadline = time.monotonic() + timeout_s
@@ -73,6 +88,9 @@ class TruthPoseListener:
                 if self._latest is not None:
                     return self._latest
             if time.monotonic() > deadline:
+                if self._lockstep_seen:
+                    raise CameraError("the vehicle runs in lockstep and waits for this companion: start it with "
+                                      "--lockstep too")
                 raise CameraError(f"no ground-truth pose received within {timeout_s:.0f} s: is the vehicle's "
                                   f"--truth-remote pointed at this companion's --truth address?")
             time.sleep(0.01)
@@ -84,9 +102,11 @@ class TruthPoseListener:
 
 
 class SplatCamera:
-    """Renders ``scene`` at the true pose: the simulated forward camera (optical axis = body x)."""
+    """Renders ``scene`` at the true pose: the simulated forward camera (optical axis = body x).
 
-    def __init__(self, scene: str, truth_url: str, backend: str = "cpu", camera=None):
+    ``truth``: the ground-truth stream's URL (listened to in a thread) or a :class:`PoseSource`."""
+
+    def __init__(self, scene: str, truth: str | PoseSource, backend: str = "cpu", camera=None):
         from scenes import PinholeCamera, load_scene
 
         self.spec, self.cloud = load_scene(scene)
@@ -99,7 +119,7 @@ class SplatCamera:
         from scenes import Pose, render_splats
 
         render_splats(self.cloud, self.camera, Pose((0.0, 0.0, -1.5), (1.0, 0.0, 0.0, 0.0)), backend=backend)
-        self.poses = TruthPoseListener(truth_url)
+        self.poses = TruthPoseListener(truth) if isinstance(truth, str) else truth
 
     def capture(self) -> Frame:
         from scenes import Pose, render_splats

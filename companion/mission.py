@@ -63,6 +63,10 @@ class MissionConfig:
     no_gap_limit: int = 8  # servo steps without any gap ever seen before giving up
     min_wall_measurements: int = 3  # flow-based wall distances needed before they steer the push
     finish: str = "hold"  # after the traversal: "hold" or "land"
+    # Camera-to-setpoint latency: the next waypoint is sent this long after its frame was taken, or once
+    # perception is done if that takes longer.  In lockstep perception costs no simulated time, so this is
+    # what it costs; 0 suits the stop-and-go servo, which waits for a still vehicle before each frame.
+    perception_latency_s: float = 0.0
 
 
 @dataclass
@@ -94,7 +98,9 @@ class Mission:
         self.tracker = tracker or ConfirmingCentroidFilter()
         self.derotate = derotate_flow
         self.result = MissionResult(State.CONNECT)
+        self.clock = link.clock     # every wait and timeout on the link's clock (wall, or lockstep)
         self._t0 = time.monotonic()
+        self._t0_clock = self.clock.now()
 
     # ----------------------------------------------------------------------------------- run
     def run(self) -> MissionResult:
@@ -153,16 +159,17 @@ class Mission:
         wall_estimates: list[float] = []  # forward coordinate of the wall, one per measurement
         ever_seen = False
         for k in range(cfg.step_budget):
-            t_step = time.monotonic()
+            t_step = self.clock.now()
             delta = heading_to_ned(step.delta_heading, self.yaw)
             waypoint = (waypoint[0] + delta[0], waypoint[1] + delta[1], waypoint[2] + delta[2])
             self.link.set_position_target(waypoint, self.yaw)
             arrived = self.link.wait_position(waypoint, self.config.arrival_tolerance_m,
                                               self.config.step_timeout_s, self.config.arrival_speed_mps)
             self._settle()
-            move_s = time.monotonic() - t_step
+            move_s = self.clock.now() - t_step
             if not self.link.telemetry.armed:
                 raise LinkError("the vehicle disarmed during the servo phase (crash or failsafe)")
+            t_frame = self.clock.now()
             frame = self.camera.capture()
             attitude = self.link.telemetry.attitude_at(frame.time_s)
             position = self.link.telemetry.position
@@ -190,11 +197,13 @@ class Mission:
             wall_distance = float(np.median(wall_estimates)) - here if enough else None
             next_step = servo_step(used, area_frac if used is not None else 0.0, k + 1, width, height, cfg,
                                    wall_distance)
+            self.clock.sleep_until(t_frame + self.config.perception_latency_s)
             self.result.servo_steps = k + 1
             self.runlog.save_images(k + 1, rgb=frame.rgb, flow_bgr=flow_to_colour(flow, bgr=True),
                                     mask=detection.mask)
             self.runlog.decision({
-                "step": k + 1, "t_wall_s": time.monotonic() - self._t0, "frame_time_s": frame.time_s,
+                "step": k + 1, "t_wall_s": time.monotonic() - self._t0, "t_clock_s": self.clock.now() - self._t0_clock,
+                "frame_time_s": frame.time_s,
                 "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
                 "centroid_raw": detection.centroid, "centroid_level": level, "centroid_used": used,
                 "attitude_est": attitude, "accepted": self.tracker.last_accepted,
@@ -244,13 +253,13 @@ class Mission:
         for p in points:
             self.link.set_position_target(p, self.yaw)
             self.link.check_alive()
-            time.sleep(period)
+            self.clock.sleep(period)
         self.link.wait_position(points[-1], 0.1, self.config.step_timeout_s, 0.3)
 
     # ------------------------------------------------------------------------------- states
     def _enter(self, state: State) -> None:
         self.result.state = state
-        self.result.states.append((round(time.monotonic() - self._t0, 3), state.value))
+        self.result.states.append((round(self.clock.now() - self._t0_clock, 3), state.value))
         log.info("state: %s", state.value.upper())
 
     def _fail(self, reason: str, safe: bool) -> None:

@@ -72,6 +72,11 @@ def build_parser() -> argparse.ArgumentParser:
     sim = p.add_argument_group("simulation")
     sim.add_argument("--airframe", choices=sorted(AIRFRAMES), default="quad250", help="airframe (default %(default)s)")
     sim.add_argument("--speed", type=float, default=1.0, help="simulation seconds per wall second (default 1)")
+    sim.add_argument("--lockstep", action="store_true",
+                     help="advance simulation time only as far as a companion releases it (flowgap-companion "
+                          "--lockstep, over the truth side channel): flights repeat exactly and run as fast as "
+                          "both processes allow; --speed is ignored; held, the vehicle beacons on the side "
+                          "channel and heartbeats the GCS link once a second")
     sim.add_argument("--no-noise", action="store_true", help="exact-truth sensors and estimate (for tests)")
     sim.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
     sim.add_argument("--start", type=triple_arg, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
@@ -116,7 +121,7 @@ def config_from_args(args: argparse.Namespace) -> ServerConfig:
         truth_remote=args.truth_remote or ("127.0.0.1", 14560 + n),
         truth_hz=args.truth_hz, speed=args.speed, seed=args.seed,
         start_position=args.start, start_yaw=math.radians(args.yaw), home=home,
-        params=tuple(args.param), scene=args.scene,
+        params=tuple(args.param), scene=args.scene, lockstep=args.lockstep,
     )
 
 
@@ -156,8 +161,9 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
-    log.info("vehicle up: GCS %s:%d, API %s:%d, truth -> %s, speed x%g", *server.address("gcs"),
-             *server.address("api"), config.truth_remote, config.speed)
+    log.info("vehicle up: GCS %s:%d, API %s:%d, truth -> %s, %s", *server.address("gcs"),
+             *server.address("api"), config.truth_remote,
+             "lockstep" if config.lockstep else f"speed x{config.speed:g}")
     try:
         verdict = server.run(duration_s=args.duration, stop=stop)
     finally:

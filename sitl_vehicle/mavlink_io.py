@@ -327,6 +327,12 @@ class MavlinkVehicleInterface:
                 if msg is not None:
                     link.send(msg)
 
+    def heartbeat(self, links: list[UdpLink]) -> None:
+        """One HEARTBEAT now on ``links``, outside the streams (a lockstep vehicle held between releases)."""
+        msg = self.build("HEARTBEAT", self.telemetry_fn())
+        for link in links:
+            link.send(msg)
+
     def build(self, name: str, t: Telemetry):
         """Encode one stream message from a telemetry snapshot (None if this vehicle cannot send it)."""
         if name == "MISSION_CURRENT":
@@ -402,8 +408,9 @@ class MavlinkVehicleInterface:
         return None
 
     # --------------------------------------------------------------------------------- receiving
-    def poll(self) -> None:
-        for link in self.links:
+    def poll(self, links: list[UdpLink] | None = None) -> None:
+        """Handle every message waiting on ``links`` (default: all of them)."""
+        for link in self.links if links is None else links:
             for msg in link.receive():
                 try:
                     self.handle(msg, link)

@@ -21,6 +21,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander, VehicleStatus
+from sitl_vehicle.lockstep import LockstepHold
 from sitl_vehicle.mavlink_io import Home, MavlinkVehicleInterface, Telemetry, UdpLink, truth_odometry
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore, apply_binding, bound_specs
 from sitl_vehicle.sim import VehicleConfig, VehicleSim
@@ -48,6 +49,7 @@ class ServerConfig:
     home: Home = field(default_factory=Home)
     params: tuple[tuple[str, float], ...] = ()  # PX4 parameter overrides applied at boot
     scene: str | None = None
+    lockstep: bool = False  # advance only as far as the companion releases (sitl_vehicle.lockstep); no speed
 
 
 class VehicleServer:
@@ -79,6 +81,7 @@ class VehicleServer:
         self._announced_crash = False
         self._announced_crossing = False
         self.wall_time_s = 0.0
+        self.lockstep: LockstepHold | None = None
 
     def _core_configs(self) -> dict:
         return {"control": self.sim.config.control, "planner": self.sim.config.planner}
@@ -91,6 +94,9 @@ class VehicleServer:
             log.info("parameter %s = %g applied to the %s", name, value, "controller/planner")
 
     # ------------------------------------------------------------------------------- addresses
+    def link(self, name: str) -> UdpLink:
+        return next(x for x in self.links if x.name == name)
+
     def address(self, link: str) -> Address:
         """The local (host, port) a link is bound to — useful with ephemeral ports in tests."""
         if link == "truth":
@@ -130,6 +136,7 @@ class VehicleServer:
             "malformed_datagrams": sum(link.malformed_datagrams for link in self.links),
             "setpoints_received": self.interface.setpoints_received,
             "setpoints_rejected": self.interface.setpoints_rejected,
+            "clock": "lockstep" if self.config.lockstep else "realtime",
         }
 
     def write_result(self, path: Path) -> None:
@@ -178,17 +185,47 @@ class VehicleServer:
         return steps
 
     def run(self, duration_s: float | None = None, stop: threading.Event | None = None) -> dict:
-        """Run in (scaled) real time until ``stop`` is set or ``duration_s`` of simulation has passed."""
+        """Run in (scaled) real time, or in lockstep, until ``stop`` is set or ``duration_s`` of simulation
+        has passed."""
         stop = stop or self._stop
+        self._next_control = self.sim.time_s
+        self._next_truth = self.sim.time_s
+        end = math.inf if duration_s is None else self.sim.time_s + duration_s
+        wall0 = time.monotonic()
+        if self.config.lockstep:
+            self._run_lockstep(end, stop)
+        else:
+            self._run_realtime(end, stop)
+        self.wall_time_s = time.monotonic() - wall0
+        return self.verdict()
+
+    def _step_to(self, target: float) -> None:
+        """Physics, commander and truth up to ``target``, streams and events at least every 10 ms of it."""
+        sim = self.sim
+        while sim.time_s + 0.5 * sim.dt < target:
+            self.advance(min(target, sim.time_s + 0.01), 1 << 30)
+            self.interface.send_streams(sim.time_s)
+            self._announce_events()
+
+    def _run_lockstep(self, end: float, stop: threading.Event) -> None:
+        """Held until the companion releases time; then read its API messages, run to the release, answer."""
+        hold = self.lockstep = LockstepHold(self)
+        log.info("lockstep: held at t=%.3f s until a companion releases time", self.sim.time_s)
+        while not stop.is_set() and self.sim.time_s < end:
+            release = hold.wait(stop)
+            if release is None:
+                break
+            hold.read_api(release)
+            self._step_to(min(release.until_s, end))
+            hold.ack(release.sequence)
+
+    def _run_realtime(self, end: float, stop: threading.Event) -> None:
         speed = self.config.speed
         sim = self.sim
-        self._next_control = sim.time_s
-        self._next_truth = sim.time_s
         wall0 = time.monotonic()
         wall_ref, sim_ref = wall0, sim.time_s
         batch = max(1, int(0.01 / sim.dt))  # service the sockets at least every 10 ms of simulation
         sockets = [link.sock for link in self.links]
-        end = math.inf if duration_s is None else sim.time_s + duration_s
         while not stop.is_set() and sim.time_s < end:
             target = min(sim_ref + (time.monotonic() - wall_ref) * speed, end)
             self.advance(target, batch)
@@ -201,8 +238,6 @@ class VehicleServer:
             if lag <= sim.dt:
                 wait = max(0.0, sim.dt / speed)
                 select.select(sockets, [], [], min(wait, 0.005))
-        self.wall_time_s = time.monotonic() - wall0
-        return self.verdict()
 
     # ----------------------------------------------------------------------- thread helpers
     def start(self) -> VehicleServer:

@@ -6,6 +6,8 @@ distance to the wall 2–4 m. ``--random N`` evaluates N random scenes (``scenes
 opening shape, size and place, wall and background distances; drawn from ``--seed``) instead of, or besides,
 named ones; their specs are saved under ``OUT/scenes`` so any flight can be re-flown with ``flowgap-sitl
 --scene OUT/scenes/NAME.json``. Several flights run at once on their own ports (PX4 instance numbers).
+Flights run in lockstep (the vehicle advances only when its companion waits), so the same seed gives the same
+rows at any machine load, as fast as the CPU allows; ``--realtime`` paces them by ``--speed`` instead.
 Writes ``flights.json`` (rows + summary) and ``flights.md``, and prints the table.
 """
 
@@ -92,7 +94,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--starts", type=int, default=3, help="randomised starts per scene (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start draws and the vehicles' noise")
     p.add_argument("--jobs", type=int, default=2, help="flights at once (default 2)")
-    p.add_argument("--speed", type=float, default=2.0, help="simulation speed-up of each flight (default 2)")
+    p.add_argument("--realtime", action="store_true",
+                   help="pace each flight by the wall clock at --speed instead of lockstep (a flight's outcome then "
+                        "depends on this machine's load)")
+    p.add_argument("--speed", type=float, default=2.0,
+                   help="with --realtime: simulation speed-up of each flight (default 2)")
+    p.add_argument("--latency", type=float, default=0.0, metavar="S",
+                   help="the companion's camera-to-setpoint latency (default 0; in lockstep, what perception "
+                        "costs in simulated time)")
     p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"])
     p.add_argument("--out", type=Path, default=Path("runs/eval_flights"), help="output directory")
@@ -103,6 +112,9 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.random < 0 or args.starts <= 0 or args.jobs <= 0:
         print("flowgap-eval-flights: error: --random must be >= 0, --starts and --jobs positive", file=sys.stderr)
+        return 2
+    if not (args.speed > 0 and args.latency >= 0):
+        print("flowgap-eval-flights: error: --speed must be positive and --latency >= 0", file=sys.stderr)
         return 2
     scenes = list(args.scenes) or ([] if args.random else list(SUITE))
     try:
@@ -126,7 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         instance = instances.get()
         try:
             v = launch(scene, args.out / f"{labels[scene]}-{i}", start, args.speed, instance, args.flow,
-                       args.detector, seed=args.seed + i, images=False, log_sink=None, altitude=altitude)
+                       args.detector, seed=args.seed + i, images=False, log_sink=None, altitude=altitude,
+                       lockstep=not args.realtime, latency_s=args.latency)
         finally:
             instances.put(instance)
         v["scene"] = labels[scene]
@@ -140,7 +153,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(future.result())
     rows.sort(key=lambda r: (r["scene"], r["run_dir"]))
     summary = summarise(rows)
-    summary.update(flow=args.flow, detector=args.detector, speed=args.speed, seed=args.seed,
+    summary.update(flow=args.flow, detector=args.detector, clock="realtime" if args.realtime else "lockstep",
+                   speed=args.speed if args.realtime else None, latency_s=args.latency, seed=args.seed,
                    starts_per_scene=args.starts, total_wall_s=round(time.monotonic() - t0, 1))
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "flights.json").write_text(json.dumps({"summary": summary, "rows": rows}, indent=2) + "\n")

@@ -50,8 +50,11 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0, instance: int = 0,
            flow: str = "dis:fine", detector: str = "parallax", seed: int = 0, no_noise: bool = False,
            timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float = 1.5,
-           link: str = "pymavlink") -> dict:
-    """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json)."""
+           link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0) -> dict:
+    """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json).
+
+    ``lockstep``: both processes on the vehicle's clock (``speed`` is then unused); ``latency_s``: the
+    companion's camera-to-setpoint latency."""
     run_dir.mkdir(parents=True, exist_ok=True)
     api, truth = 14540 + instance, 14560 + instance
     vehicle_result = run_dir / "vehicle_result.json"
@@ -60,12 +63,16 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
                    "--result", str(vehicle_result), "--log-level", "WARNING"]
     if no_noise:
         vehicle_cmd.append("--no-noise")
+    if lockstep:
+        vehicle_cmd.append("--lockstep")
     companion_cmd = [sys.executable, "-m", "companion", "--connect", f"udpin://127.0.0.1:{api}",
                      "--truth", f"udpin://127.0.0.1:{truth}", "--scene", scene, "--flow", flow,
                      "--detector", detector, "--run-dir", str(run_dir / "companion"), "--altitude", f"{altitude:g}",
-                     "--link", link]
+                     "--link", link, "--latency", f"{latency_s:g}"]
     if not images:
         companion_cmd.append("--no-images")
+    if lockstep:
+        companion_cmd.append("--lockstep")
     t0 = time.monotonic()
     companion = _start(companion_cmd, "[companion]", log_sink)
     vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink)
@@ -79,7 +86,8 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
                 log.error("flight timed out after %.0f s", timeout_s)
                 break
             time.sleep(0.1)
-        time.sleep(1.0 / max(speed, 0.1))  # let the vehicle settle in Hold before the verdict is taken
+        if not lockstep:  # (a lockstep companion hands the vehicle its settling second itself)
+            time.sleep(1.0 / max(speed, 0.1))  # let the vehicle settle in Hold before the verdict is taken
     except KeyboardInterrupt:
         interrupted = True
         log.warning("interrupted: stopping both processes")
@@ -106,6 +114,8 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         "altitude_m": altitude,
         "flow": flow,
         "detector": detector,
+        "clock": "lockstep" if lockstep else "realtime",
+        "latency_s": latency_s,
         "run_dir": str(run_dir),
     }
     if not vehicle_verdict:
@@ -131,7 +141,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scene", default="window1_brick", help="suite scene name or spec path (default %(default)s)")
     p.add_argument("--start", type=triple_arg, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
                    help="vehicle start position NED (default 0,0,0: on the ground, 3 m before the wall)")
-    p.add_argument("--speed", type=float, default=2.0, help="simulation speed-up (default 2)")
+    p.add_argument("--speed", type=float, default=2.0, help="simulation speed-up (default 2; unused in lockstep)")
+    p.add_argument("--lockstep", action="store_true",
+                   help="run both processes on the vehicle's clock: the same seed gives the same flight at any "
+                        "machine load, as fast as the CPU allows")
+    p.add_argument("--latency", type=float, default=0.0, metavar="S",
+                   help="the companion's camera-to-setpoint latency (default 0; in lockstep, what perception "
+                        "costs in simulated time)")
     p.add_argument("--instance", type=int, default=0, help="port offset, to run several flights at once")
     p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"], help="gap detector")
@@ -157,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     run_dir = args.run_dir or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.scene}"
     verdict = launch(args.scene, run_dir, args.start, args.speed, args.instance, args.flow, args.detector,
                      args.seed, args.no_noise, args.timeout, log_sink=None if args.quiet else sys.stdout,
-                     link=args.link)
+                     link=args.link, lockstep=args.lockstep, latency_s=args.latency)
     if args.result:
         args.result.parent.mkdir(parents=True, exist_ok=True)
         args.result.write_text(json.dumps(verdict, indent=2) + "\n")

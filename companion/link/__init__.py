@@ -9,12 +9,16 @@ from companion.link.base import AutopilotLink, Endpoint, LinkError, LinkLost, Te
 BACKENDS = ("pymavlink", "mavsdk")
 
 
-def make_link(url: str, backend: str = "pymavlink", tlog_path: Path | None = None) -> AutopilotLink:
+def make_link(url: str, backend: str = "pymavlink", tlog_path: Path | None = None, clock=None) -> AutopilotLink:
+    """A link to the autopilot at ``url``; ``clock`` (:mod:`companion.clock`, default the wall clock) paces it."""
     if backend == "pymavlink":
         from companion.link.pymavlink_link import PymavlinkLink
 
-        return PymavlinkLink(url, tlog_path=tlog_path)
+        return PymavlinkLink(url, tlog_path=tlog_path, clock=clock)
     if backend == "mavsdk":
+        if clock is not None and clock.name != "wall":
+            raise ValueError("the mavsdk link cannot run in lockstep: mavsdk_server keeps its own wall-clock "
+                             "timers and threads, which no simulated clock can hold; use --link pymavlink")
         from companion.link.mavsdk_link import MavsdkLink
 
         return MavsdkLink(url)  # MAVSDK hides the packets: no .tlog from this backend

@@ -10,10 +10,11 @@ import abc
 import bisect
 import math
 import threading
-import time
 from collections import deque
 from dataclasses import dataclass, field
 from urllib.parse import urlparse
+
+from companion.clock import Clock, WallClock
 
 
 class LinkError(RuntimeError):
@@ -101,7 +102,7 @@ class TelemetryCache:
     landed: bool | None = None  # None until EXTENDED_SYS_STATE says
     home: tuple[float, float, float] | None = None  # lat°, lon°, alt m
     autopilot: str = "unknown"
-    last_heartbeat: float = -math.inf  # time.monotonic()
+    last_heartbeat: float = -math.inf  # the link's clock (companion.clock)
     position_time: float = -math.inf
     statustexts: list[tuple[int, str]] = field(default_factory=list)
     # (autopilot time s, roll, pitch, yaw): to read the attitude at a camera frame's time stamp
@@ -129,13 +130,17 @@ class TelemetryCache:
 
 
 class AutopilotLink(abc.ABC):
-    """Connect, arm, take off, fly offboard position setpoints, land — for any MAVLink autopilot."""
+    """Connect, arm, take off, fly offboard position setpoints, land — for any MAVLink autopilot.
+
+    Every wait, timeout and rate reads ``clock`` (:mod:`companion.clock`): the wall clock, or in lockstep the
+    simulated vehicle's."""
 
     name = "abstract"
     heartbeat_timeout_s = 3.0
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Clock | None = None) -> None:
         self.telemetry = TelemetryCache()
+        self.clock: Clock = clock if clock is not None else WallClock()
 
     # --- lifecycle
     @abc.abstractmethod
@@ -167,7 +172,7 @@ class AutopilotLink(abc.ABC):
 
     # --- shared helpers
     def alive(self) -> bool:
-        return time.monotonic() - self.telemetry.last_heartbeat < self.heartbeat_timeout_s
+        return self.clock.now() - self.telemetry.last_heartbeat < self.heartbeat_timeout_s
 
     def check_alive(self) -> None:
         if not self.alive():
@@ -175,15 +180,13 @@ class AutopilotLink(abc.ABC):
 
     def wait_for(self, predicate, timeout_s: float, what: str, period_s: float = 0.02) -> None:
         """Wait until ``predicate(telemetry)``; LinkLost if heartbeats stop, LinkError on timeout."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
+        def ready() -> bool:
             self.check_alive()
             with self.telemetry.lock:
-                ok = predicate(self.telemetry)
-            if ok:
-                return
-            time.sleep(period_s)
-        raise LinkError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+                return predicate(self.telemetry)
+
+        if not self.clock.wait_for(ready, timeout_s, period_s):
+            raise LinkError(f"timed out after {timeout_s:.0f} s waiting for {what}")
 
     def try_wait_for(self, predicate, timeout_s: float, what: str) -> bool:
         """``wait_for`` that answers False on a timeout; a lost link still raises LinkLost."""

@@ -10,7 +10,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 
 from companion.link.base import AutopilotLink, LinkError, parse_endpoint
 
@@ -77,7 +76,7 @@ class MavsdkLink(AutopilotLink):
                                                         Offboard(self._system))
         t = self.telemetry
         with t.lock:
-            t.last_heartbeat = time.monotonic()
+            t.last_heartbeat = self.clock.now()
             t.autopilot = {"PX4": "px4", "ARDUPILOT": "ardupilot"}.get(self._system.autopilot_type().name, "other")
         self._subscribe()
         self._watch = threading.Thread(target=self._watch_connection, name="mavsdk-watch", daemon=True)
@@ -95,7 +94,7 @@ class MavsdkLink(AutopilotLink):
             with t.lock:
                 t.position = (pv.position.north_m, pv.position.east_m, pv.position.down_m)
                 t.velocity = (pv.velocity.north_m_s, pv.velocity.east_m_s, pv.velocity.down_m_s)
-                t.position_time = time.monotonic()
+                t.position_time = self.clock.now()
 
         def attitude(e, _):
             rpy = (math.radians(e.roll_deg), math.radians(e.pitch_deg), math.radians(e.yaw_deg))
@@ -137,7 +136,7 @@ class MavsdkLink(AutopilotLink):
         while not self._stop.wait(0.1):
             if self._system is not None and self._system.is_connected():
                 with self.telemetry.lock:
-                    self.telemetry.last_heartbeat = time.monotonic()
+                    self.telemetry.last_heartbeat = self.clock.now()
 
     def close(self) -> None:
         self._stop.set()

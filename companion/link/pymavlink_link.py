@@ -1,8 +1,10 @@
-"""The pymavlink backend: one receive thread, one 20 Hz setpoint thread, acked commands, a .tlog.
+"""The pymavlink backend: one receiver, one 20 Hz setpoint thread, acked commands, a .tlog.
 
-Only the receive thread reads the connection, so no lock is ever held across a blocking receive and
-the setpoint stream never waits on perception or telemetry. Modes are set by name through pymavlink's
-tables (PX4: ``px4_map``; ArduPilot: ``mode_mapping_byname``), so PX4 and ArduPilot both fly.
+Only the receiver reads the connection (a thread on the wall clock; in lockstep the clock calls it after
+each release), so no lock is ever held across a blocking receive and the setpoint stream never waits on
+perception or telemetry.  Every wait and rate runs on the link's clock (:mod:`companion.clock`).  Modes are
+set by name through pymavlink's tables (PX4: ``px4_map``; ArduPilot: ``mode_mapping_byname``), so PX4 and
+ArduPilot both fly.
 """
 
 from __future__ import annotations
@@ -10,7 +12,6 @@ from __future__ import annotations
 import logging
 import math
 import threading
-import time
 from pathlib import Path
 
 from pymavlink import mavutil
@@ -33,8 +34,9 @@ class PymavlinkLink(AutopilotLink):
     name = "pymavlink"
 
     def __init__(self, url: str, tlog_path: Path | None = None, setpoint_hz: float = 20.0,
-                 source_system: int = 1, source_component: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER):
-        super().__init__()
+                 source_system: int = 1, source_component: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER,
+                 clock=None):
+        super().__init__(clock)
         self.endpoint = parse_endpoint(url)
         self.setpoint_hz = setpoint_hz
         self._source = (source_system, source_component)
@@ -42,9 +44,9 @@ class PymavlinkLink(AutopilotLink):
         self._conn = None
         self._send_lock = threading.Lock()
         self._acks: dict[int, tuple[int, float]] = {}
-        self._ack_cond = threading.Condition()
-        self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
+        self._stream = None          # the setpoint thread (a companion.clock.ClockThread)
+        self._detach = None          # detaches the receiver from the clock
+        self.messages_sent = 0
         self._target: tuple[float, float, float, float] | None = None  # x, y, z, yaw
         self._streamed = 0  # setpoints sent since the current target was set
         self._target_system = 1
@@ -64,21 +66,17 @@ class PymavlinkLink(AutopilotLink):
                                                     autoreconnect=True, **kwargs)
         except OSError as exc:
             raise LinkError(f"cannot open {ep.mavutil}: {exc}") from None
-        if self._tlog:
-            self._conn.mav.set_send_callback(lambda m: self._tlog.write(m.get_msgbuf()))
-        self._start_thread(self._receive_loop, "link-rx")
+        self._conn.mav.set_send_callback(self._sent)
+        self._detach = self.clock.attach_link(self._receive_some, lambda: self.messages_sent, "link-rx")
         if ep.scheme == "udpout" or ep.scheme == "tcp":
             self._send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
                                                          mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
-        deadline = time.monotonic() + timeout_s
-        while not self.alive():
-            if time.monotonic() > deadline:
-                raise LinkError(f"no autopilot heartbeat on {ep.mavutil} within {timeout_s:.0f} s: is the "
-                                f"vehicle running and sending to this address?")
-            time.sleep(0.05)
+        if not self.clock.wait_for(self.alive, timeout_s, 0.05):
+            raise LinkError(f"no autopilot heartbeat on {ep.mavutil} within {timeout_s:.0f} s: is the "
+                            f"vehicle running and sending to this address?")
         log.info("connected to %s autopilot (system %d) on %s", self.telemetry.autopilot, self._target_system,
                  ep.mavutil)
-        self._start_thread(self._stream_loop, "link-setpoints")
+        self._stream = self.clock.spawn(self._stream_loop, "link-setpoints")
         self._send(mavlink.MAVLink_command_long_message(self._target_system, self._target_component,
                                                         mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
                                                         mavlink.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0))
@@ -88,30 +86,35 @@ class PymavlinkLink(AutopilotLink):
                                                         mavlink.MAVLINK_MSG_ID_ATTITUDE, 20000, 0, 0, 0, 0, 0))
 
     def close(self) -> None:
-        self._stop.set()
-        for thread in self._threads:
-            thread.join(timeout=2)
+        if self._stream is not None:
+            self._stream.stop()
+            self._stream.join(timeout=2)
+        if self._detach is not None:
+            self._detach()
         if self._conn is not None:
             self._conn.close()
         if self._tlog:
             self._tlog.close()
 
-    def _start_thread(self, target, name: str) -> None:
-        thread = threading.Thread(target=target, name=name, daemon=True)
-        thread.start()
-        self._threads.append(thread)
+    def _sent(self, msg) -> None:
+        self.messages_sent += 1
+        if self._tlog:
+            self._tlog.write(msg.get_msgbuf())
 
     # ------------------------------------------------------------------------------ receive
-    def _receive_loop(self) -> None:
-        while not self._stop.is_set():
+    def _receive_some(self, timeout_s: float) -> int:
+        """Read what has arrived (waiting at most ``timeout_s`` for the first message); how many were read."""
+        count = 0
+        while True:
             try:
-                msg = self._conn.recv_match(blocking=True, timeout=0.1)
+                msg = self._conn.recv_match(blocking=count == 0 and timeout_s > 0, timeout=timeout_s)
             except (OSError, ValueError) as exc:  # socket closed under us, or a mangled packet
-                if self._stop.is_set():
-                    return
                 log.debug("receive error: %s", exc)
-                continue
-            if msg is None or msg.get_type() == "BAD_DATA":
+                return count
+            if msg is None:
+                return count
+            count += 1
+            if msg.get_type() == "BAD_DATA":
                 continue
             if self._tlog:
                 self._tlog.write(msg.get_msgbuf())
@@ -130,7 +133,7 @@ class PymavlinkLink(AutopilotLink):
             self._target_system, self._target_component = msg.get_srcSystem(), msg.get_srcComponent()
             self._autopilot_mav, self._vehicle_type = msg.autopilot, msg.type
             with t.lock:
-                t.last_heartbeat = time.monotonic()
+                t.last_heartbeat = self.clock.now()
                 t.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 t.mode = mavutil.mode_string_v10(msg)
                 t.autopilot = "px4" if msg.autopilot == mavlink.MAV_AUTOPILOT_PX4 else (
@@ -139,7 +142,7 @@ class PymavlinkLink(AutopilotLink):
             with t.lock:
                 t.position = (msg.x, msg.y, msg.z)
                 t.velocity = (msg.vx, msg.vy, msg.vz)
-                t.position_time = time.monotonic()
+                t.position_time = self.clock.now()
         elif kind == "ATTITUDE":
             with t.lock:
                 t.attitude_euler = (msg.roll, msg.pitch, msg.yaw)
@@ -158,21 +161,19 @@ class PymavlinkLink(AutopilotLink):
                 with t.lock:
                     t.statustexts.append((msg.severity, text))
         elif kind == "COMMAND_ACK":
-            with self._ack_cond:
-                self._acks[msg.command] = (msg.result, time.monotonic())
-                self._ack_cond.notify_all()
+            self._acks[msg.command] = (msg.result, self.clock.now())
 
     # -------------------------------------------------------------------------------- send
     def _send(self, msg) -> None:
         with self._send_lock:
             self._conn.mav.send(msg)
 
-    def _stream_loop(self) -> None:
+    def _stream_loop(self, thread) -> None:
         period = 1.0 / self.setpoint_hz
-        next_time = time.monotonic()
+        next_time = self.clock.now()
         next_heartbeat = next_time
-        while not self._stop.is_set():
-            now = time.monotonic()
+        while not thread.stopped.is_set():
+            now = self.clock.now()
             if now >= next_heartbeat:
                 next_heartbeat = now + 1.0
                 self._send(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_ONBOARD_CONTROLLER,
@@ -187,27 +188,26 @@ class PymavlinkLink(AutopilotLink):
                 self.setpoint_times.append(now)
                 del self.setpoint_times[:-2000]
             next_time += period
-            self._stop.wait(max(0.0, next_time - time.monotonic()))
+            self.clock.sleep_until(next_time)
 
     def command(self, command: int, *params: float, timeout_s: float = 3.0, retries: int = 3) -> None:
         """COMMAND_LONG with retransmission; raises LinkError naming the result and the autopilot's reason."""
         p = [float(v) for v in params] + [0.0] * (7 - len(params))
         for attempt in range(retries):
-            sent = time.monotonic()
+            sent = self.clock.now()
             with self.telemetry.lock:
                 texts_before = len(self.telemetry.statustexts)
             self._send(mavlink.MAVLink_command_long_message(self._target_system, self._target_component,
                                                             command, attempt, *p))
-            with self._ack_cond:
-                got = self._ack_cond.wait_for(lambda sent=sent: self._acks.get(command, (None, -1.0))[1] >= sent,
-                                              timeout=timeout_s)
-                result = self._acks.get(command, (None, 0))[0] if got else None
+            got = self.clock.wait_for(lambda sent=sent: self._acks.get(command, (None, -math.inf))[1] >= sent,
+                                      timeout_s, 0.005)
+            result = self._acks.get(command, (None, 0))[0] if got else None
             if result is None:
                 self.check_alive()
                 continue
             if result in (mavlink.MAV_RESULT_ACCEPTED, mavlink.MAV_RESULT_IN_PROGRESS):
                 return
-            time.sleep(0.05)  # the reason arrives as a STATUSTEXT right after the ACK
+            self.clock.sleep(0.05)  # the reason arrives as a STATUSTEXT right after the ACK
             with self.telemetry.lock:
                 reasons = [text for _, text in self.telemetry.statustexts[texts_before:]]
             reason = f": {reasons[-1]}" if reasons else ""
@@ -240,16 +240,17 @@ class PymavlinkLink(AutopilotLink):
             self._send(mavlink.MAVLink_param_set_message(self._target_system, self._target_component,
                                                          b"MIS_TAKEOFF_ALT", altitude_m,
                                                          mavlink.MAV_PARAM_TYPE_REAL32))
-            time.sleep(0.1)
+            self.clock.sleep(0.1)
         self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, amsl)
 
     def start_offboard(self, position, yaw: float) -> None:
         self.set_position_target(position, yaw)
         # PX4 only accepts Offboard while setpoints stream: send them for at least a second first.
-        deadline = time.monotonic() + 5.0
-        while self._streamed < self.setpoint_hz and time.monotonic() < deadline:
+        def streamed() -> bool:
             self.check_alive()
-            time.sleep(0.02)
+            return self._streamed >= self.setpoint_hz
+
+        self.clock.wait_for(streamed, 5.0)
         self.set_mode(OFFBOARD_MODE.get(self.telemetry.autopilot, "OFFBOARD"))
 
     def set_position_target(self, position, yaw: float) -> None:
