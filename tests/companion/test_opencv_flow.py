@@ -58,6 +58,7 @@ def test_registry_rejects_unknown_and_bad_inputs():
     ("raft:refine=0", ("raft", {"refine_scale": 0.0})),
     ("raft:refine=1.5,refine_iters=6", ("raft", {"refine_scale": 1.5, "refine_iters": 6})),
     ("raft:refine_min=1.5,refine_flow=0", ("raft", {"refine_min_scale": 1.5, "refine_max_flow": 0.0})),
+    ("raft:small-convex,precision=fp32", ("raft", {"variant": "small-convex", "precision": "fp32"})),
 ])
 def test_backend_specs_parse_to_options(spec, expected):
     from companion.flow.registry import parse_backend
@@ -68,6 +69,7 @@ def test_backend_specs_parse_to_options(spec, expected):
 @pytest.mark.parametrize("spec, needle", [
     ("raft:zoom=2", "unknown RAFT option 'zoom'"),
     ("raft:scale=big", "scale must be a number"),
+    ("raft:precision=fp16", "precision must be auto, bf16 or fp32"),
     ("raft:mirror=yes", "mirror must be 0 or 1"),
     ("raft:refine=x", "refine must be a number"),
     ("raft:refine_iters=1.5", "refine_iters must be a number"),

@@ -8,12 +8,7 @@ import torch
 
 from companion.flow import FlowWeightsError, make_flow_backend
 from companion.flow.raft import RAFT, InputPadder, RaftConfig
-from companion.flow.raft.backend import (
-    DEFAULT_INPUT_SCALE,
-    DEFAULT_MIRROR_AVERAGE,
-    DEFAULT_REFINE_ITERS,
-    DEFAULT_REFINE_SCALE,
-)
+from companion.flow.raft.backend import RAFT_DEFAULTS, InferenceSettings
 from companion.flow.raft.corr import CorrBlock
 from companion.flow.raft.upsample import convex_upsample, upflow8
 from companion.flow.raft.weights import clear_cache, load_raft_state_dict, save_flowgap_weights
@@ -283,7 +278,7 @@ def test_refinement_pass_is_a_second_pass_on_enlarged_frames_started_from_the_fi
     expected = second.estimate(img1, img2, flow_init=coarse)
     np.testing.assert_array_equal(refined.estimate(img1, img2), expected)
     assert not np.allclose(expected, coarse, atol=1e-3)
-    # refine_scale 0 and None are the same single pass
+    # refine_scale None is the weights' own setting: one pass for random weights, as RAFT runs
     single = make_flow_backend("raft", random_init_seed=5, iters=2, input_scale=1.0, refine_scale=None)
     np.testing.assert_array_equal(single.estimate(img1, img2), coarse)
     # a caller's initial flow starts the first pass; with the flow head silenced both passes carry it through
@@ -322,13 +317,32 @@ def test_an_adaptive_refinement_runs_the_second_pass_at_the_scale_it_picks():
     np.testing.assert_array_equal(adaptive.estimate(img1, img2), second.estimate(img1, img2, flow_init=coarse))
 
 
-def test_the_default_settings_are_the_shipped_weights_own():
-    from companion.flow.raft.backend import DEFAULT_REFINE_MAX_FLOW, DEFAULT_REFINE_MIN_SCALE
-
+def test_settings_come_from_the_weights_file_and_options_override_them(tmp_path):
+    # random weights and files without a record run RAFT's own settings: 12 iterations, one pass
     backend = make_flow_backend("raft", random_init_seed=1)
-    assert (backend.input_scale, backend.refine_scale, backend.refine_iters, backend.mirror_average) == \
-        (DEFAULT_INPUT_SCALE, DEFAULT_REFINE_SCALE, DEFAULT_REFINE_ITERS, DEFAULT_MIRROR_AVERAGE)
-    assert (backend.refine_min_scale, backend.refine_max_flow) == (DEFAULT_REFINE_MIN_SCALE, DEFAULT_REFINE_MAX_FLOW)
+    assert backend.settings == RAFT_DEFAULTS and (backend.iters, backend.refine_scale) == (12, 0.0)
+    own = InferenceSettings(iters=3, input_scale=1.25, refine_scale=1.5, refine_iters=2, precision="fp32")
+    model = RAFT(RaftConfig.small(upsample_align_corners=False))
+    save_flowgap_weights(model, tmp_path / "w.pth", "small", inference=own)
+    clear_cache()
+    backend = make_flow_backend("raft", weights=tmp_path / "w.pth")
+    assert backend.settings == own
+    backend = make_flow_backend("raft", weights=tmp_path / "w.pth", iters=5, refine_scale=0)
+    assert backend.settings == InferenceSettings(iters=5, input_scale=1.25, refine_scale=0.0, refine_iters=2)
+    save_flowgap_weights(model, tmp_path / "plain.pth", "small")
+    assert make_flow_backend("raft", weights=tmp_path / "plain.pth").settings == RAFT_DEFAULTS
+
+
+def test_a_malformed_settings_record_is_a_one_line_error(tmp_path):
+    model = RAFT(RaftConfig.small())
+    save_flowgap_weights(model, tmp_path / "w.pth", "small")
+    obj = torch.load(tmp_path / "w.pth", weights_only=True)
+    for bad, needle in (({"iters": 2, "zoom": 3}, "unknown inference settings"), ({"refine_iters": 0}, "refine_iters"),
+                        ([1, 2], "expected a mapping")):
+        obj["inference"] = bad
+        torch.save(obj, tmp_path / "bad.pth")
+        clear_cache()
+        _one_line_error(needle, weights=tmp_path / "bad.pth")
 
 
 @pytest.mark.parametrize("options, needle", [
@@ -433,8 +447,8 @@ def test_weights_file_records_the_upsampling_convention(tmp_path):
     assert a.model.config.upsample_align_corners is False and b.model.config.upsample_align_corners is True
     assert not np.array_equal(a.estimate(img1, img2), b.estimate(img1, img2))
     torch.save(obj | {"upsample_align_corners": "yes"}, tmp_path / "bad.pth")
-    torch.save(obj | {"version": 3}, tmp_path / "v3.pth")
-    for name, needle in (("bad.pth", "upsample_align_corners"), ("v3.pth", "version 3")):
+    torch.save(obj | {"version": 4}, tmp_path / "v4.pth")
+    for name, needle in (("bad.pth", "upsample_align_corners"), ("v4.pth", "version 4")):
         with pytest.raises(FlowWeightsError, match=needle):
             make_flow_backend("raft", weights=tmp_path / name)
 
@@ -507,3 +521,91 @@ def test_warm_start_converges_to_cold_result_with_enough_iterations():
     np.testing.assert_allclose(warm, cold, atol=1e-3)       # ... and not after enough of them
     np.testing.assert_allclose(cold[..., 0], 1.5, atol=2e-3)
     np.testing.assert_allclose(cold[..., 1], -0.75, atol=2e-3)
+
+
+# --- RAFT-small-convex: RAFT-small with a learned convex upsampling head -----------------------------------
+
+def test_small_convex_shapes_and_its_file_is_recognised(tmp_path):
+    model = RAFT(RaftConfig.small_convex()).eval()
+    assert model.config.variant == "small-convex" and model.update_block.mask is not None
+    small = RAFT(RaftConfig.small())
+    extra = sum(p.numel() for p in model.parameters()) - sum(p.numel() for p in small.parameters())
+    assert extra == (96 * 9 + 1) * 128 + (128 + 1) * 576      # the mask head: 3×3 96→128, 1×1 128→576
+    img = torch.rand(2, 3, 64, 96) * 255
+    with torch.inference_mode():
+        out = model(img, img.flip(-1), iters=3, all_predictions=True)
+    assert out.flow_up.shape == (2, 2, 64, 96) and out.flow_low.shape == (2, 2, 8, 12) and len(out.predictions) == 3
+    save_flowgap_weights(model, tmp_path / "convex.pth", "small-convex")
+    clear_cache()
+    assert load_raft_state_dict(tmp_path / "convex.pth").variant == "small-convex"
+    backend = make_flow_backend("raft", weights=tmp_path / "convex.pth", iters=2)
+    assert backend.variant == "small-convex" and backend.estimate(*textured_pair(64, 64, (1, 1))).shape == (64, 64, 2)
+
+
+def test_a_new_convex_head_upsamples_like_the_bilinear_model_it_grows_from():
+    small = random_model("small", seed=3)
+    convex = RAFT(RaftConfig.small_convex()).eval()
+    missing = convex.load_state_dict(small.state_dict(), strict=False).missing_keys
+    assert sorted(missing) == sorted(k for k in convex.state_dict() if k.startswith("update_block.mask."))
+    small.config = RaftConfig.small(upsample_align_corners=False)      # the centres convention, as convex's
+    img1, img2 = (torch.from_numpy(a).permute(2, 0, 1)[None].float() for a in textured_pair(64, 80, (2.0, -1.0)))
+    with torch.inference_mode():
+        a, b = small(img1, img2, iters=2).flow_up, convex(img1, img2, iters=2).flow_up
+    # the same coarse flow; the head's bilinear start leaks 1 % weight onto each of the other window cells
+    assert (a - b).abs().mean() < 0.02 * a.abs().mean() + 1e-3
+
+
+def test_bilinear_mask_logits_reproduce_bilinear_upsampling_of_a_linear_field():
+    from companion.flow.raft.upsample import bilinear_mask_logits
+
+    h, w = 6, 7
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij")
+    flow = torch.stack([0.3 * xs - 0.1 * ys + 1.0, 0.2 * ys + 0.05 * xs]).unsqueeze(0)
+    logits = bilinear_mask_logits(floor=1e-9).view(1, 576, 1, 1).expand(1, 576, h, w)
+    up = convex_upsample(flow, logits, pad="replicate")
+    ref = upflow8(flow, align_corners=False)
+    assert torch.allclose(up[..., 4:-4, 4:-4], ref[..., 4:-4, 4:-4], atol=1e-4)
+
+
+def test_replicate_padding_keeps_a_constant_flow_exact_up_to_the_border():
+    flow = torch.full((1, 2, 4, 5), 1.25)
+    mask = torch.randn(1, 576, 4, 5)
+    assert torch.allclose(convex_upsample(flow, mask, pad="replicate"), torch.full((1, 2, 32, 40), 10.0))
+    assert not torch.allclose(convex_upsample(flow, mask, pad="zeros"), torch.full((1, 2, 32, 40), 10.0))
+    with pytest.raises(ValueError, match="unknown convex-upsampling padding"):
+        convex_upsample(flow, mask, pad="reflect")
+
+
+# --- precision ------------------------------------------------------------------------------------------
+
+def test_native_bf16_is_read_from_the_cpu_flags():
+    from companion.flow.raft.settings import cpu_has_native_bf16
+
+    assert cpu_has_native_bf16("processor: 0\nflags\t\t: fpu sse avx2 avx512f avx512_bf16 avx512vl\n")
+    assert cpu_has_native_bf16("flags : fpu amx_bf16 amx_tile\n")
+    assert not cpu_has_native_bf16("flags : fpu sse avx2 avx512f avx512bw\n")
+    assert not cpu_has_native_bf16("")
+
+
+def test_auto_precision_falls_back_to_fp32_with_a_log_line_where_the_cpu_has_no_bf16(caplog, monkeypatch):
+    from companion.flow.raft import settings
+
+    monkeypatch.setattr(settings, "_fallback_logged", False)
+    with caplog.at_level("INFO", logger="companion.flow.raft.settings"):
+        assert settings.resolve_precision("auto", torch.device("cpu"), native_bf16=False) == "fp32"
+    assert "no AVX512-BF16 or AMX; running in float32" in caplog.text
+    assert settings.resolve_precision("auto", torch.device("cpu"), native_bf16=True) == "bf16"
+    assert settings.resolve_precision("bf16", torch.device("cpu"), native_bf16=False) == "bf16"   # as asked
+    assert settings.resolve_precision("auto", torch.device("cuda"), native_bf16=True) == "fp32"
+    monkeypatch.setattr(settings, "cpu_has_native_bf16", lambda: False)
+    backend = make_flow_backend("raft", random_init_seed=1, precision="auto")
+    assert backend.precision == "fp32" and backend.describe().endswith(", fp32")
+
+
+def test_bf16_and_fp32_agree_on_a_textured_pair():
+    img1, img2 = textured_pair(96, 128, (2.5, -1.5))
+    flows = {p: make_flow_backend("raft", random_init_seed=7, iters=3, precision=p).estimate(img1, img2)
+             for p in ("fp32", "bf16")}
+    diff = np.abs(flows["bf16"] - flows["fp32"])
+    scale = np.abs(flows["fp32"]).mean()
+    assert diff.mean() < 0.05 * scale + 0.01 and not np.array_equal(flows["bf16"], flows["fp32"])

@@ -233,11 +233,12 @@ def test_sequence_loss_weights_iterations_and_ignores_invalid_pixels():
     assert float(loss2) == pytest.approx(1.0)
 
 
-def test_training_steps_reduce_loss_on_a_fixed_batch():
+@pytest.mark.parametrize("variant", ["small", "small-convex"])
+def test_training_steps_reduce_loss_on_a_fixed_batch(variant):
     torch.set_num_threads(2)
     batch = batch_at(RenderedFlowDataset(seed=4, width=64, height=64, pairs_per_scene=2), 0, 2)
     torch.manual_seed(0)
-    model = train_raft.build_model("small")
+    model = train_raft.build_model(variant)
     model.train()
     opt = torch.optim.AdamW(model.parameters(), lr=1e-3, weight_decay=1e-4)
     losses = []
@@ -336,25 +337,21 @@ def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     assert result["pairs"] == 2 and result["layout"] == "flowgap"
     assert math.isfinite(result["epe"]) and result["epe"] >= 0
     assert math.isfinite(result["dis_medium_epe"]) and result["dis_medium_epe"] >= 0
-    assert f"{result['epe']:.3f}" in out
-    assert result["input_scale"] == train_raft.DEFAULT_INPUT_SCALE          # the raft backend's defaults
-    assert result["refine_scale"] == train_raft.DEFAULT_REFINE_SCALE
-    assert result["refine_iters"] == train_raft.DEFAULT_REFINE_ITERS
-    assert result["refine_min_scale"] == train_raft.DEFAULT_REFINE_MIN_SCALE
-    assert result["refine_max_flow"] == train_raft.DEFAULT_REFINE_MAX_FLOW
-    assert (f"refined at scale {train_raft.DEFAULT_REFINE_MIN_SCALE:g}-{train_raft.DEFAULT_REFINE_SCALE:g} "
-            f"(motion within {train_raft.DEFAULT_REFINE_MAX_FLOW:g} px") in out
+    assert f"{result['epe']:.3f}" in out and "dis:fine" in out and math.isfinite(result["dis_fine_epe"])
+    # the checkpoint carries the settings its run validated with: RAFT's one pass, iterations as asked
+    assert (result["iters"], result["input_scale"], result["refine_scale"], result["refine_iters"]) == (2, 1.0, 0, 0)
+    assert result["precision"] == "fp32" and "(one pass)" in out
     rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
-                          "--height", "64", "--val-size", "2", "--val-iters", "2", "--refine-scale", "0",
-                          "--out", str(tmp_path / "one-pass")])
-    assert rc == 0 and "refined" not in capsys.readouterr().out
-    one_pass = json.loads((tmp_path / "one-pass" / "eval.json").read_text())
-    assert one_pass["refine_scale"] == 0 and one_pass["refine_iters"] == 0 and one_pass["epe"] != result["epe"]
-    assert one_pass["refine_max_flow"] == 0
+                          "--height", "64", "--val-size", "2", "--refine-scale", "1.5", "--refine-iters", "2",
+                          "--out", str(tmp_path / "two-pass")])
+    assert rc == 0 and "then 2 at scale 1.5" in capsys.readouterr().out
+    two_pass = json.loads((tmp_path / "two-pass" / "eval.json").read_text())
+    assert two_pass["refine_scale"] == 1.5 and two_pass["refine_iters"] == 2 and two_pass["epe"] != result["epe"]
+    assert two_pass["iters"] == 2 and two_pass["refine_max_flow"] == 0
     rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
-                          "--height", "64", "--val-size", "2", "--val-iters", "2", "--refine-max-flow", "0",
-                          "--out", str(tmp_path / "fixed")])
-    assert rc == 0 and f"refined at scale {train_raft.DEFAULT_REFINE_SCALE:g} (" in capsys.readouterr().out
+                          "--height", "64", "--val-size", "2", "--refine-scale", "2", "--refine-max-flow", "8",
+                          "--refine-min-scale", "1.25", "--out", str(tmp_path / "adaptive")])
+    assert rc == 0 and "at scale 1.25-2 (lowered for motion over 8 px)" in capsys.readouterr().out
     rc = train_raft.main(["--eval-only", str(trained_run / "checkpoint-000004.pth"), "--width", "64",
                           "--height", "64", "--val-size", "2", "--val-iters", "2", "--input-scale", "1.5",
                           "--out", str(tmp_path / "zoomed")])
@@ -375,6 +372,25 @@ def test_eval_only_prints_epe_and_writes_json(trained_run, tmp_path, capsys):
     assert rc == 0 and f"2 seed-{VALIDATION_SEED} 3-4 m pairs" in capsys.readouterr().out
     far = json.loads((tmp_path / "far" / "eval.json").read_text())
     assert far["distance"] == [3.0, 4.0] and far["epe"] != result["epe"]
+
+
+def test_a_convex_run_starts_from_small_weights_and_trains_under_bf16(trained_run, tmp_path, capsys):
+    rc = train_raft.main([*TINY, "--variant", "small-convex", "--init", str(trained_run / "raft-small-flowgap.pth"),
+                          "--steps", "2", "--val-size", "1", "--precision", "bf16", "--seed", "5",
+                          "--out", str(tmp_path)])
+    assert rc == 0
+    err = capsys.readouterr().err
+    assert "starts from" in err and "mask head starts as bilinear upsampling" in err
+    ckpt = torch.load(tmp_path / "checkpoint-000002.pth", weights_only=True)
+    assert ckpt["variant"] == "small-convex" and ckpt["train"]["config"]["precision"] == "bf16"
+    start = torch.load(trained_run / "raft-small-flowgap.pth", weights_only=True)["state_dict"]
+    moved = [k for k in start if not torch.equal(start[k], ckpt["state_dict"][k])]
+    assert moved and all(k in ckpt["state_dict"] for k in start)           # trained from them, not replaced
+    # weights trained under bf16 are meant to run in it (where the CPU has it): the file says so
+    assert ckpt["inference"]["precision"] == "auto" and ckpt["inference"]["iters"] == 2
+    rc = train_raft.main([*TINY, "--variant", "large", "--init", str(trained_run / "raft-small-flowgap.pth"),
+                          "--steps", "1", "--val-size", "0", "--out", str(tmp_path / "large")])
+    assert rc == 2 and "use --variant small" in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -1,9 +1,11 @@
 """Perception timings on a 320×240 frame pair: flow backends and gap detectors (medians).
 
 The pair is a smooth random texture shifted by (2.5, −1.5) px, so no scene build or rendering is needed.
-RAFT-small runs the shipped weights (``companion/flow/weights``); RAFT-large, which has none, runs seeded random
-weights (its time is the architecture's).  Accuracy lives in ``flowgap-train-raft --eval-only`` and
-``flowgap-eval-masks``, not here.  torch and OpenCV are held to 2 threads.
+``perception.raft_default_*`` is the companion's default RAFT exactly as it flies (``make_flow_backend("raft")``:
+the default weights with their own inference settings and precision, which the label states), with its peak
+memory per pair; the RAFT-small stage-6 weights run their own two-pass settings and one pass; RAFT-large, which
+has no weights, runs seeded random ones (its time is the architecture's).  Accuracy lives in ``flowgap-train-raft
+--eval-only`` and ``flowgap-eval-masks``, not here.  torch and OpenCV are held to 2 threads.
 """
 
 from __future__ import annotations
@@ -38,14 +40,41 @@ def _median_ms(fn, runs: int = RUNS) -> float:
     return 1e3 * statistics.median(times)
 
 
-def _refine_scales(raft) -> str:
-    """'2-2.5 (lowered for motion over 64 px)' for an adaptive refinement pass, '2' for a fixed one."""
-    from companion.flow.raft.backend import refinement_is_adaptive
+_PEAK_SCRIPT = """
+import sys, numpy as np, torch
+from pathlib import Path
+torch.set_num_threads(2)
+from companion.flow import make_flow_backend
+from tools.benchmarks.perception import _pair
+def status(key):
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(key):
+            return int(line.split()[1]) / 1024.0
+img1, img2 = _pair()
+raft = make_flow_backend("raft")
+raft.estimate(img1, img2)
+Path("/proc/self/clear_refs").write_text("5")     # resets the peak (VmHWM) to the current size
+base = status("VmRSS:")
+raft.estimate(img1, img2)
+print(status("VmHWM:") - base, base)
+"""
 
-    if refinement_is_adaptive(raft.refine_scale, raft.refine_min_scale, raft.refine_max_flow):
-        return (f"{raft.refine_min_scale:g}-{raft.refine_scale:g} (lowered for motion over "
-                f"{raft.refine_max_flow:g} px)")
-    return f"{raft.refine_scale:g}"
+
+def _peak_mb() -> tuple[float, float] | None:
+    """(peak MB one pair of the default RAFT adds to the loaded process, the process's MB before it), in a
+    fresh process (Linux: /proc/self/status); None where that cannot be read."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if not Path("/proc/self/clear_refs").exists():
+        return None
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.run([sys.executable, "-c", _PEAK_SCRIPT], cwd=root, capture_output=True, text=True, timeout=600)
+    if proc.returncode != 0:
+        return None
+    peak, base = (float(v) for v in proc.stdout.split())
+    return peak, base
 
 
 def run() -> dict[str, dict]:
@@ -66,24 +95,27 @@ def run() -> dict[str, dict]:
     far = make_flow_backend("farneback")
     out["perception.farneback_ms_320x240"] = {"value": _median_ms(lambda: far.estimate(img1, img2)),
                                               "unit": f"ms per 320x240 pair, median of {RUNS}"}
-    # RAFT-small runs the shipped weights with the backend's default settings (a pass at input scale 1, then a
-    # refinement pass at scale 2-2.5, lowered for large motions) and, for comparison, in one pass on the frames
-    # as they are; no RAFT-large weights are shipped, so it is timed with random ones (a forward pass costs the
-    # same whatever the weights)
-    for key, variant, options in (("raft_small_12it", "small", {"iters": 12}),
-                                  ("raft_small_6it", "small", {"iters": 6}),
-                                  ("raft_small_12it_onepass", "small", {"iters": 12, "refine_scale": 0}),
-                                  ("raft_large_12it", "large", {"iters": 12, "refine_scale": 0})):
-        shipped = variant == "small"
-        raft = make_flow_backend("raft", **options) if shipped else \
-            make_flow_backend("raft", variant=variant, random_init_seed=0, **options)
-        runs = 3 if variant == "large" else 5
-        passes = f"RAFT-{variant} {raft.iters} iterations at input scale {raft.input_scale:g}" + (
-            f" then {raft.refine_iters} at scale {_refine_scales(raft)}" if raft.refine_scale else " (one pass)")
+    from companion.flow.raft.backend import WEIGHTS_DIR
+
+    stage6 = WEIGHTS_DIR / "raft-small-flowgap.pth"
+    for key, options, runs in (("raft_default", {}, 7),
+                               ("raft_default_fp32", {"precision": "fp32"}, 7),
+                               ("raft_small_12it", {"weights": stage6}, 5),
+                               ("raft_small_12it_onepass", {"weights": stage6, "refine_scale": 0}, 5),
+                               ("raft_large_12it", {"variant": "large", "random_init_seed": 0, "iters": 12,
+                                                    "refine_scale": 0}, 3)):
+        raft = make_flow_backend("raft", **options)
+        weights = ("random weights (timing only)" if raft.weights_path is None else
+                   "the default weights" if "weights" not in options else f"weights {raft.weights_path.name}")
         out[f"perception.{key}_ms_320x240"] = {
             "value": _median_ms(lambda r=raft: r.estimate(img1, img2), runs),
-            "unit": f"ms per 320x240 pair, {passes}, CPU 2 threads, "
-                    + ("shipped weights" if shipped else "random weights (timing only)") + f", median of {runs}"}
+            "unit": f"ms per 320x240 pair, {raft.describe()}, CPU 2 threads, {weights}, median of {runs}"}
+    peak = _peak_mb()
+    if peak is not None:
+        out["perception.raft_default_peak_mb"] = {
+            "value": round(peak[0], 1),
+            "unit": f"MB a 320x240 pair of the default RAFT adds at its peak to the process (which holds "
+                    f"{peak[1]:.0f} MB with the model loaded; VmHWM, fresh process)"}
     flow = make_flow_backend("dis", preset="medium").estimate(img1, img2)
     ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
     expansion = np.stack([xs - W / 2, ys - H / 2], -1) * 0.03        # forward-motion field for the detectors

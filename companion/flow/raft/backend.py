@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,21 @@ import torch.nn.functional as F
 from companion.flow.base import FlowWeightsError, check_flow, check_pair
 from companion.flow.raft.model import RAFT, RaftConfig
 from companion.flow.raft.padder import InputPadder
+from companion.flow.raft.settings import (
+    INPUT_SCALE_RANGE,
+    PRECISIONS,
+    RAFT_DEFAULTS,
+    InferenceSettings,
+    cpu_has_native_bf16,
+    describe_settings,
+    refinement_is_adaptive,
+    resolve_precision,
+)
 from companion.flow.raft.weights import EXPECTED, load_raft_state_dict
+
+__all__ = ["DEFAULT_WEIGHTS", "INPUT_SCALE_RANGE", "PRECISIONS", "RAFT_DEFAULTS", "InferenceSettings", "RaftBackend",
+           "cpu_has_native_bf16", "describe_settings", "estimate_flow", "refinement_is_adaptive",
+           "refinement_scale", "resolve_precision"]
 
 log = logging.getLogger(__name__)
 
@@ -21,22 +36,6 @@ DEFAULT_WEIGHTS = WEIGHTS_DIR / "raft-small-flowgap.pth"
 # The 4-level correlation pyramid halves the 1/8-resolution feature map three times, so a frame (after
 # padding to multiples of 8) must be at least 8 × 8 = 64 pixels on each side.
 MIN_SIDE = 64
-# The shipped weights' inference settings (MODEL_CARD.md says how they were chosen): a first pass on the frames
-# as they are, then a refinement pass on frames enlarged by DEFAULT_REFINE_SCALE, started from the first
-# pass's flow, so that RAFT's 1/8-resolution grid is finer relative to the camera's pixels (the flow is shrunk
-# back).  On enlarged frames alone, RAFT fails on the largest motions; started from the first pass it does not.
-# The refinement scale adapts to the motion: DEFAULT_REFINE_SCALE, lowered (to DEFAULT_REFINE_MIN_SCALE at the
-# least) so that the first pass's largest motions (its 99th-percentile flow), enlarged, stay within
-# DEFAULT_REFINE_MAX_FLOW pixels: small motions (far from the wall) gain from a finer grid, while the largest
-# enlarged motions go beyond what training showed (zoomed at most ×2) and fail.
-DEFAULT_INPUT_SCALE = 1.0
-DEFAULT_REFINE_SCALE = 2.5
-DEFAULT_REFINE_MIN_SCALE = 2.0
-DEFAULT_REFINE_MAX_FLOW = 64.0
-DEFAULT_REFINE_ITERS = 4
-# Whether the backend also runs the mirrored pair and averages (MODEL_CARD.md says why it is the default or not).
-DEFAULT_MIRROR_AVERAGE = False
-INPUT_SCALE_RANGE = (0.25, 4.0)  # accepted input_scale values (smaller frames, or 16× the compute)
 
 
 def zoom_frame(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -79,58 +78,32 @@ def forward_interpolate(flow_low: torch.Tensor) -> torch.Tensor:
 class RaftBackend:
     """RAFT optical flow.
 
-    Options: ``variant`` "small"|"large"|None (None: from the weights file), ``weights`` path (default
-    ``companion/flow/weights/raft-small-flowgap.pth``), ``iters`` refinement iterations (12), ``warm_start``
-    (start each pair from the previous pair's flow, carried forward), ``device`` ("cpu", "cuda", ...),
-    ``num_threads`` (torch intra-op threads on CPU; None leaves the setting alone), ``random_init_seed``
-    (build seeded random weights instead of loading a file: for timing and tests only), ``input_scale``
-    (enlarge both frames by this factor before RAFT and shrink the flow back: finer flow for about
-    ``input_scale**2`` times the compute; the default is the shipped weights' own, :data:`DEFAULT_INPUT_SCALE`),
-    ``mirror_average`` (also run the left-right mirrored pair, in the same batch, and average the two
-    flows: their errors are partly independent; about twice the compute), ``refine_scale`` (after the pass at
-    ``input_scale``, run a second pass on frames enlarged by up to this factor, started from the first pass's
-    flow; None or 0: one pass) with ``refine_iters`` iterations, at the scale :func:`refinement_scale` picks
-    between ``refine_min_scale`` and ``refine_scale`` so that the enlarged motion stays within
-    ``refine_max_flow`` pixels (0, or ``refine_min_scale`` ≥ ``refine_scale``: always ``refine_scale``).  The
-    defaults are the shipped weights' own: :data:`DEFAULT_INPUT_SCALE`, :data:`DEFAULT_REFINE_SCALE`,
-    :data:`DEFAULT_REFINE_MIN_SCALE`, :data:`DEFAULT_REFINE_MAX_FLOW`, :data:`DEFAULT_REFINE_ITERS`.
+    Options: ``variant`` "small"|"small-convex"|"large"|None (None: from the weights file), ``weights`` path
+    (default :data:`DEFAULT_WEIGHTS`), ``warm_start`` (start each pair from the previous pair's flow, carried
+    forward), ``device`` ("cpu", "cuda", ...), ``num_threads`` (torch intra-op threads on CPU; None leaves the
+    setting alone), ``random_init_seed`` (build seeded random weights instead of loading a file: for timing
+    and tests only), and the :class:`InferenceSettings` ``iters``, ``input_scale``, ``mirror_average``,
+    ``refine_scale``, ``refine_iters``, ``refine_min_scale``, ``refine_max_flow`` and ``precision``: each None
+    (the default) takes the weights file's own setting (the one its model card was measured with), or RAFT's
+    (:data:`RAFT_DEFAULTS`) for files that carry none and for random weights.
     """
 
     name = "raft"
 
-    def __init__(self, variant: str | None = None, weights: str | Path | None = None, iters: int = 12,
+    def __init__(self, variant: str | None = None, weights: str | Path | None = None, iters: int | None = None,
                  warm_start: bool = False, device: str = "cpu", num_threads: int | None = None,
                  random_init_seed: int | None = None, padding_mode: str = "sintel",
-                 input_scale: float = DEFAULT_INPUT_SCALE,
-                 mirror_average: bool = DEFAULT_MIRROR_AVERAGE,
-                 refine_scale: float | None = DEFAULT_REFINE_SCALE,
-                 refine_iters: int = DEFAULT_REFINE_ITERS,
-                 refine_min_scale: float = DEFAULT_REFINE_MIN_SCALE,
-                 refine_max_flow: float = DEFAULT_REFINE_MAX_FLOW) -> None:
+                 input_scale: float | None = None, mirror_average: bool | None = None,
+                 refine_scale: float | None = None, refine_iters: int | None = None,
+                 refine_min_scale: float | None = None, refine_max_flow: float | None = None,
+                 precision: str | None = None) -> None:
         if num_threads is not None:
             torch.set_num_threads(int(num_threads))
-        if iters < 0:
-            raise ValueError("iters must be >= 0")
-        if refine_iters < 1:
-            raise ValueError(f"refine_iters must be >= 1 (got {refine_iters}); set refine_scale to 0 for one pass")
-        lo, hi = INPUT_SCALE_RANGE
-        if not (np.isfinite(input_scale) and lo <= input_scale <= hi):
-            raise ValueError(f"input_scale must be within {lo:g}..{hi:g} (got {input_scale})")
-        if refine_scale is not None and refine_scale != 0 and not (np.isfinite(refine_scale)
-                                                                   and lo <= refine_scale <= hi):
-            raise ValueError(f"refine_scale must be 0 (one pass) or within {lo:g}..{hi:g} (got {refine_scale})")
-        if not (np.isfinite(refine_min_scale) and lo <= refine_min_scale <= hi):
-            raise ValueError(f"refine_min_scale must be within {lo:g}..{hi:g} (got {refine_min_scale})")
-        if not (np.isfinite(refine_max_flow) and refine_max_flow >= 0):
-            raise ValueError(f"refine_max_flow must be 0 (a fixed refine_scale) or a positive number of pixels "
-                             f"(got {refine_max_flow})")
-        self.input_scale = float(input_scale)
-        self.refine_scale = float(refine_scale) if refine_scale else None
-        self.refine_iters = int(refine_iters)
-        self.refine_min_scale = float(refine_min_scale)
-        self.refine_max_flow = float(refine_max_flow)
-        self.mirror_average = bool(mirror_average)
-        self.iters = int(iters)
+        overrides = {"iters": iters, "input_scale": input_scale, "mirror_average": mirror_average,
+                     "refine_scale": refine_scale, "refine_iters": refine_iters,
+                     "refine_min_scale": refine_min_scale, "refine_max_flow": refine_max_flow,
+                     "precision": precision}
+        RAFT_DEFAULTS.replace(**overrides)           # bad values fail before any file is read
         self.warm_start = bool(warm_start)
         self.padding_mode = padding_mode
         self._device = torch.device(device)
@@ -143,6 +116,7 @@ class RaftBackend:
                 self.model = RAFT(RaftConfig.for_variant(self.variant))
             self.weights_path = None
             self.weights_layout = "random"
+            own = RAFT_DEFAULTS
         else:
             path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
             loaded = load_raft_state_dict(path)
@@ -161,12 +135,29 @@ class RaftBackend:
                                        f"expected {EXPECTED})") from None
             self.weights_path = path
             self.weights_layout = loaded.layout
+            own = loaded.inference or RAFT_DEFAULTS
+        self.settings = own.replace(**overrides)
+        self.precision = resolve_precision(self.settings.precision, self._device)
         self.model.to(self._device).eval()
         self._previous_low: torch.Tensor | None = None
+
+    # the settings by name, as the benchmarks and tools read them
+    iters = property(lambda self: self.settings.iters)
+    input_scale = property(lambda self: self.settings.input_scale)
+    mirror_average = property(lambda self: self.settings.mirror_average)
+    refine_scale = property(lambda self: self.settings.refine_scale)
+    refine_iters = property(lambda self: self.settings.refine_iters)
+    refine_min_scale = property(lambda self: self.settings.refine_min_scale)
+    refine_max_flow = property(lambda self: self.settings.refine_max_flow)
 
     @property
     def device(self) -> str:
         return str(self._device)
+
+    def describe(self) -> str:
+        """What runs, for benchmark labels and logs: 'RAFT-small-convex, 4 iterations at input scale 1 (one
+        pass), bf16'."""
+        return f"RAFT-{self.variant}, {describe_settings(self.settings)}, {self.precision}"
 
     def reset(self) -> None:
         """Forget the warm-start state (start of a new sequence)."""
@@ -179,43 +170,36 @@ class RaftBackend:
         h, w = check_pair(img1, img2)
         init = None if flow_init is None else check_flow(flow_init, (h, w))
         previous = self._previous_low if self.warm_start else None
-        flow, low = estimate_flow(self.model, img1, img2, iters=self.iters if iters is None else int(iters),
-                                  input_scale=self.input_scale, flow_init=init, previous_low=previous,
-                                  padding_mode=self.padding_mode, device=self._device,
-                                  mirror_average=self.mirror_average, refine_scale=self.refine_scale,
-                                  refine_iters=self.refine_iters, refine_min_scale=self.refine_min_scale,
-                                  refine_max_flow=self.refine_max_flow)
+        settings = self.settings if iters is None else self.settings.replace(iters=iters)
+        flow, low = estimate_flow(self.model, img1, img2, settings, flow_init=init, previous_low=previous,
+                                  padding_mode=self.padding_mode, device=self._device, precision=self.precision)
         if self.warm_start:
             self._previous_low = low
         return flow
 
 
-def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float = 1.0,
+def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, settings: InferenceSettings = RAFT_DEFAULTS,
                   flow_init: np.ndarray | None = None, previous_low: torch.Tensor | None = None,
                   padding_mode: str = "sintel", device: torch.device | str = "cpu",
-                  mirror_average: bool = False, refine_scale: float | None = None,
-                  refine_iters: int = DEFAULT_REFINE_ITERS, refine_min_scale: float = DEFAULT_REFINE_MIN_SCALE,
-                  refine_max_flow: float = 0.0) -> tuple[np.ndarray, torch.Tensor]:
-    """(H×W×2 float32 flow, 1/8-resolution flow of the first pass) of ``model`` for one pair of H×W×3 frames.
+                  precision: str | None = None) -> tuple[np.ndarray, torch.Tensor]:
+    """(H×W×2 float32 flow, 1/8-resolution flow of the first pass) of ``model`` for one pair of H×W×3 frames,
+    run as ``settings`` say (``precision``: the resolved "bf16" or "fp32", default resolved from them).
 
-    With ``refine_scale``, the first pass's flow starts a second pass of ``refine_iters`` iterations on the
-    frames enlarged by :func:`refinement_scale` (``refine_scale`` when ``refine_max_flow`` is 0), whose flow is
-    returned (the 1/8-resolution flow returned stays the first pass's, on the grid that ``previous_low`` is
-    matched against).
+    With a refinement scale, the first pass's flow starts a second pass of ``refine_iters`` iterations on the
+    frames enlarged by :func:`refinement_scale`, whose flow is returned (the 1/8-resolution flow returned
+    stays the first pass's, on the grid that ``previous_low`` is matched against).
     """
-    flow, low = _one_pass(model, img1, img2, iters, input_scale, flow_init, previous_low, padding_mode, device,
-                          mirror_average)
-    if refine_scale:
-        scale = refinement_scale(flow, refine_scale, refine_min_scale, refine_max_flow)
-        flow, _ = _one_pass(model, img1, img2, refine_iters, scale, flow, None, padding_mode, device,
-                            mirror_average)
+    device = torch.device(device)
+    precision = precision or resolve_precision(settings.precision, device)
+    autocast = (torch.autocast(device.type, torch.bfloat16) if precision == "bf16" else nullcontext())
+    with autocast:
+        flow, low = _one_pass(model, img1, img2, settings.iters, settings.input_scale, flow_init, previous_low,
+                              padding_mode, device, settings.mirror_average)
+        if settings.refine_scale:
+            scale = refinement_scale(flow, settings.refine_scale, settings.refine_min_scale, settings.refine_max_flow)
+            flow, _ = _one_pass(model, img1, img2, settings.refine_iters, scale, flow, None, padding_mode, device,
+                                settings.mirror_average)
     return flow, low
-
-
-def refinement_is_adaptive(refine_scale: float | None, min_scale: float, max_flow: float) -> bool:
-    """Whether a refinement pass picks its scale per frame (:func:`refinement_scale`) rather than always
-    running at ``refine_scale``: it needs a ``max_flow`` and room between ``min_scale`` and ``refine_scale``."""
-    return bool(refine_scale and max_flow and min_scale < refine_scale)
 
 
 def refinement_scale(flow: np.ndarray, refine_scale: float, min_scale: float, max_flow: float) -> float:
@@ -227,8 +211,6 @@ def refinement_scale(flow: np.ndarray, refine_scale: float, min_scale: float, ma
         return float(refine_scale)
     longest = float(np.percentile(np.hypot(flow[..., 0], flow[..., 1]), 99))
     return float(np.clip(max_flow / max(longest, 1e-6), min_scale, refine_scale))
-
-
 def _one_pass(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float,
               flow_init: np.ndarray | None, previous_low: torch.Tensor | None, padding_mode: str,
               device: torch.device | str, mirror_average: bool) -> tuple[np.ndarray, torch.Tensor]:

@@ -11,12 +11,15 @@ from torch import nn
 from companion.flow.raft.corr import CorrBlock
 from companion.flow.raft.extractor import basic_encoder, small_encoder
 from companion.flow.raft.update import UpdateBlock
-from companion.flow.raft.upsample import convex_upsample, upflow8
+from companion.flow.raft.upsample import bilinear_mask_logits, convex_upsample, upflow8
+
+VARIANTS = ("small", "small-convex", "large")
 
 
 @dataclass(frozen=True)
 class RaftConfig:
-    """Architecture hyper-parameters.  Use :meth:`small` or :meth:`large` (the paper's two models)."""
+    """Architecture hyper-parameters.  Use :meth:`small` or :meth:`large` (the paper's two models), or
+    :meth:`small_convex` (the companion's: RAFT-small with RAFT's learned convex upsampling)."""
 
     variant: str = "small"
     hidden_dim: int = 96
@@ -25,23 +28,35 @@ class RaftConfig:
     corr_radius: int = 3
     dropout: float = 0.0
     # RAFT-small's bilinear ×8 upsampling: True as the RAFT authors (coarse grid stretched to the corner
-    # pixels), False with each coarse value at its block's centre (see ``upflow8``).  RAFT's convex
-    # upsampling ignores it.
+    # pixels), False with each coarse value at its block's centre (see ``upflow8``).  Convex upsampling
+    # ignores it.
     upsample_align_corners: bool = True
+    # Convex upsampling's mask head (hidden width; 0: bilinear upsampling) and how its 3×3 windows are
+    # padded at the frame's border: "zeros" as RAFT, "replicate" so that border pixels are not pulled
+    # towards zero flow.
+    mask_dim: int = 0
+    upsample_pad: str = "zeros"
 
     @classmethod
     def small(cls, **kw) -> RaftConfig:
         return cls("small", 96, 64, 4, 3, **kw)
 
     @classmethod
+    def small_convex(cls, **kw) -> RaftConfig:
+        """RAFT-small's encoders and update block, upsampled by a learned convex combination (as RAFT) from a
+        mask head of 128 channels: one pass at the camera's resolution, no enlarged second pass."""
+        kw.setdefault("upsample_align_corners", False)
+        return cls("small-convex", 96, 64, 4, 3, mask_dim=128, upsample_pad="replicate", **kw)
+
+    @classmethod
     def large(cls, **kw) -> RaftConfig:
-        return cls("large", 128, 128, 4, 4, **kw)
+        return cls("large", 128, 128, 4, 4, mask_dim=256, **kw)
 
     @classmethod
     def for_variant(cls, variant: str, **kw) -> RaftConfig:
-        if variant not in ("small", "large"):
-            raise ValueError(f"unknown RAFT variant {variant!r}; choose 'small' or 'large'")
-        return cls.small(**kw) if variant == "small" else cls.large(**kw)
+        if variant not in VARIANTS:
+            raise ValueError(f"unknown RAFT variant {variant!r}; choose one of {', '.join(VARIANTS)}")
+        return {"small": cls.small, "small-convex": cls.small_convex, "large": cls.large}[variant](**kw)
 
 
 class RaftOutput(NamedTuple):
@@ -68,7 +83,7 @@ class RAFT(nn.Module):
         super().__init__()
         config = config if config is not None else RaftConfig.small()
         self.config = config
-        small = config.variant == "small"
+        small = config.variant != "large"
         hdim, cdim = config.hidden_dim, config.context_dim
         if small:
             self.fnet = small_encoder(128, "instance", config.dropout)
@@ -78,7 +93,14 @@ class RAFT(nn.Module):
             self.cnet = basic_encoder(hdim + cdim, "batch", config.dropout)
         corr_channels = config.corr_levels * (2 * config.corr_radius + 1) ** 2
         self.update_block = UpdateBlock(corr_channels=corr_channels, hidden_dim=hdim, context_dim=cdim,
-                                        small=small)
+                                        small=small, mask_dim=config.mask_dim)
+        if config.variant == "small-convex":
+            # Start the new mask head as bilinear interpolation from the block centres, so that RAFT-small
+            # weights loaded into it flow exactly as they did; training then sharpens it at edges.
+            last = self.update_block.mask[-1]
+            nn.init.zeros_(last.weight)
+            with torch.no_grad():
+                last.bias.copy_(bilinear_mask_logits() / self.update_block.mask_scale)
 
     def forward(self, image1: torch.Tensor, image2: torch.Tensor, iters: int = 12,
                 flow_init: torch.Tensor | None = None, all_predictions: bool = False) -> RaftOutput:
@@ -93,7 +115,8 @@ class RAFT(nn.Module):
 
         # 1. features of both frames (one batch), context of the first
         fmap1, fmap2 = self.fnet(torch.cat([image1, image2], dim=0)).float().chunk(2, dim=0)
-        corr_fn = CorrBlock(fmap1, fmap2, num_levels=cfg.corr_levels, radius=cfg.corr_radius)
+        with torch.autocast(image1.device.type, enabled=False):   # the correlation volume stays float32
+            corr_fn = CorrBlock(fmap1, fmap2, num_levels=cfg.corr_levels, radius=cfg.corr_radius)
         net, inp = torch.split(self.cnet(image1), [cfg.hidden_dim, cfg.context_dim], dim=1)
         net, inp = torch.tanh(net), torch.relu(inp)
 
@@ -107,20 +130,23 @@ class RAFT(nn.Module):
 
         # 3. iterate: look up correlation around the estimate, update the hidden state, step the flow
         predictions: list[torch.Tensor] = []
-        up_mask = None
         for it in range(iters):
             coords1 = coords1.detach()
             corr = corr_fn(coords1)
-            net, up_mask, delta = self.update_block(net, inp, corr, coords1 - coords0)
-            coords1 = coords1 + delta
+            net, delta = self.update_block(net, inp, corr, coords1 - coords0)
+            coords1 = coords1 + delta.float()
             if all_predictions or it == iters - 1:
-                predictions.append(self._upsample(coords1 - coords0, up_mask))
+                predictions.append(self._upsample(coords1 - coords0, net))
 
         flow_low = coords1 - coords0
-        flow_up = predictions[-1] if predictions else self._upsample(flow_low, up_mask)
+        flow_up = predictions[-1] if predictions else self._upsample(flow_low, net)
         return RaftOutput(flow_low, flow_up, predictions if all_predictions else [])
 
-    def _upsample(self, flow: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
-        if mask is None:
-            return upflow8(flow, align_corners=self.config.upsample_align_corners)
-        return convex_upsample(flow, mask)
+    def _upsample(self, flow: torch.Tensor, net: torch.Tensor) -> torch.Tensor:
+        mask = self.update_block.mask_logits(net)
+        # Upsampling stays float32 under bf16 autocast: an 8-bit mantissa would cost a tenth of a pixel on a
+        # 40 px flow.
+        with torch.autocast(flow.device.type, enabled=False):
+            if mask is None:
+                return upflow8(flow.float(), align_corners=self.config.upsample_align_corners)
+            return convex_upsample(flow.float(), mask.float(), pad=self.config.upsample_pad)

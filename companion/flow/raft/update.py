@@ -1,7 +1,8 @@
 """The recurrent update operator: motion encoder → ConvGRU → flow head (and upsampling-mask head).
 
 RAFT (full) uses the basic motion encoder, a separable ConvGRU (1×5 then 5×1) and a mask head for convex
-upsampling; RAFT-small uses a smaller motion encoder and a plain 3×3 ConvGRU, and upsamples bilinearly.
+upsampling; RAFT-small uses a smaller motion encoder and a plain 3×3 ConvGRU, and upsamples bilinearly;
+flowgap's RAFT-small-convex is RAFT-small with a (narrower) mask head.
 """
 
 from __future__ import annotations
@@ -83,27 +84,32 @@ class MotionEncoder(nn.Module):
 
 
 class UpdateBlock(nn.Module):
-    """One refinement step: ``(net, inp, corr, flow) -> (net, up_mask or None, delta_flow)``."""
+    """One refinement step: ``(net, inp, corr, flow) -> (net, delta_flow)``; ``mask_logits(net)`` gives the
+    convex-upsampling mask of a hidden state (None for bilinear upsampling, ``mask_dim`` 0)."""
 
-    def __init__(self, *, corr_channels: int, hidden_dim: int, context_dim: int, small: bool) -> None:
+    # the 0.25 scale balances the mask branch's gradients; checkpoints were trained with it
+    mask_scale = 0.25
+
+    def __init__(self, *, corr_channels: int, hidden_dim: int, context_dim: int, small: bool,
+                 mask_dim: int = 0) -> None:
         super().__init__()
         if small:
             self.encoder = MotionEncoder(corr_channels, (96,), (64, 32), 82)
             self.gru = ConvGRU(hidden_dim, context_dim + 82)
             self.flow_head = FlowHead(hidden_dim, 128)
-            self.mask = None
         else:
             self.encoder = MotionEncoder(corr_channels, (256, 192), (128, 64), 128)
             self.gru = SepConvGRU(hidden_dim, context_dim + 128)
             self.flow_head = FlowHead(hidden_dim, 256)
-            self.mask = nn.Sequential(nn.Conv2d(hidden_dim, 256, 3, padding=1), nn.ReLU(inplace=True),
-                                      nn.Conv2d(256, 8 * 8 * 9, 1))
+        self.mask = (nn.Sequential(nn.Conv2d(hidden_dim, mask_dim, 3, padding=1), nn.ReLU(inplace=True),
+                                   nn.Conv2d(mask_dim, 8 * 8 * 9, 1)) if mask_dim else None)
 
     def forward(self, net: torch.Tensor, inp: torch.Tensor, corr: torch.Tensor,
-                flow: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+                flow: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         motion = self.encoder(flow, corr)
         net = self.gru(net, torch.cat([inp, motion], dim=1))
-        delta = self.flow_head(net)
-        # the 0.25 scale balances the mask branch's gradients; checkpoints were trained with it
-        mask = 0.25 * self.mask(net) if self.mask is not None else None
-        return net, mask, delta
+        return net, self.flow_head(net)
+
+    def mask_logits(self, net: torch.Tensor) -> torch.Tensor | None:
+        """N×576×h×w convex-upsampling logits of a hidden state (computed only when a flow is upsampled)."""
+        return self.mask_scale * self.mask(net) if self.mask is not None else None

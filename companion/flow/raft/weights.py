@@ -12,10 +12,12 @@ Layouts recognised by :func:`load_raft_state_dict`:
     ``context_encoder.``, ``update_block.motion_encoder.``, ``mask_predictor.``, ``Conv2dNormActivation``
     sub-indices ``.0`` conv / ``.1`` norm).  Mapped key by key by :func:`torchvision_to_ours`.
 ``flowgap``
-    ``{"format": "flowgap-raft", "version": 2, "variant": "small"|"large", "upsample_align_corners": bool,
-    "state_dict": {...ours...}}``, written by :func:`save_flowgap_weights` (the RAFT training tool's
-    output).  Version 1 files have no ``upsample_align_corners``: they were trained with the RAFT authors'
-    ``True``, as were the official and torchvision checkpoints.
+    ``{"format": "flowgap-raft", "version": 3, "variant": "small"|"small-convex"|"large",
+    "upsample_align_corners": bool, "inference": {...}, "state_dict": {...ours...}}``, written by
+    :func:`save_flowgap_weights` (the RAFT training tool's output).  ``inference`` (optional, version 3) holds
+    the :class:`~companion.flow.raft.settings.InferenceSettings` the weights are meant to run with, those
+    their model card was measured with.  Version 1 files have no ``upsample_align_corners``: they were
+    trained with the RAFT authors' ``True``, as were the official and torchvision checkpoints.
 
 Nothing is ever downloaded: a missing or mismatched file raises :class:`FlowWeightsError` with a one-line
 message naming the path and the expected format.
@@ -33,23 +35,26 @@ from typing import NamedTuple
 import torch
 
 from companion.flow.base import FlowWeightsError
+from companion.flow.raft.settings import InferenceSettings
 
 log = logging.getLogger(__name__)
 
 FORMAT_NAME = "flowgap-raft"
-FORMAT_VERSION = 2
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+READABLE_VERSIONS = (1, 2, 3)
 EXPECTED = ("an official RAFT checkpoint (raft-things.pth / raft-small.pth, 'module.' keys), a torchvision "
             "raft_large/raft_small state dict, or a flowgap-raft file")
 
 
 class RaftWeights(NamedTuple):
-    """A loaded weights file: its layout, RAFT variant, our-layout state dict and upsampling convention."""
+    """A loaded weights file: its layout, RAFT variant, our-layout state dict, upsampling convention and the
+    inference settings it carries (None: none recorded)."""
 
     layout: str
     variant: str
     state_dict: dict[str, torch.Tensor]
     upsample_align_corners: bool = True
+    inference: InferenceSettings | None = None
 
     def config(self):
         """The :class:`RaftConfig` these weights were trained with."""
@@ -84,9 +89,9 @@ def detect_layout(obj: object) -> str:
 
 
 def detect_variant(state_dict: Mapping[str, torch.Tensor]) -> str | None:
-    """'small' / 'large' from our-layout keys, None when neither GRU is present."""
+    """'small' / 'small-convex' / 'large' from our-layout keys, None when neither GRU is present."""
     if "update_block.gru.convz.weight" in state_dict:
-        return "small"
+        return "small-convex" if "update_block.mask.0.weight" in state_dict else "small"
     if "update_block.gru.convz1.weight" in state_dict:
         return "large"
     return None
@@ -149,10 +154,11 @@ def torchvision_to_ours(state_dict: Mapping[str, torch.Tensor]) -> dict[str, tor
     return out
 
 
-def to_ours(obj: object) -> tuple[str, dict[str, torch.Tensor], bool]:
-    """(layout, our-layout state dict, upsample_align_corners) for a loaded checkpoint object.
+def to_ours(obj: object) -> tuple[str, dict[str, torch.Tensor], bool, InferenceSettings | None]:
+    """(layout, our-layout state dict, upsample_align_corners, inference settings or None) for a loaded
+    checkpoint object.
 
-    Raises ValueError if the layout is unrecognised.
+    Raises ValueError if the layout is unrecognised or a flowgap file's fields are malformed.
     """
     layout = detect_layout(obj)
     if layout == "flowgap":
@@ -162,11 +168,15 @@ def to_ours(obj: object) -> tuple[str, dict[str, torch.Tensor], bool]:
         align = obj.get("upsample_align_corners", True)
         if not isinstance(align, bool):
             raise ValueError(f"upsample_align_corners is {align!r}, expected true or false")
-        return layout, dict(obj["state_dict"]), align
+        record = obj.get("inference")
+        if record is not None and not isinstance(record, Mapping):
+            raise ValueError(f"inference is {type(record).__name__}, expected a mapping of settings")
+        inference = InferenceSettings.from_record(dict(record)) if record is not None else None
+        return layout, dict(obj["state_dict"]), align, inference
     if layout == "official":
-        return layout, official_to_ours(obj), True
+        return layout, official_to_ours(obj), True, None
     if layout == "torchvision":
-        return layout, torchvision_to_ours(obj), True
+        return layout, torchvision_to_ours(obj), True, None
     raise ValueError("unrecognised checkpoint layout")
 
 
@@ -193,13 +203,13 @@ def load_raft_state_dict(path: str | Path) -> RaftWeights:
             raise FlowWeightsError(f"RAFT weights unreadable: {path} ({type(exc).__name__}; expected {EXPECTED})"
                                    ) from exc
         try:
-            layout, sd, align = to_ours(obj)
+            layout, sd, align, inference = to_ours(obj)
         except ValueError as exc:
             raise FlowWeightsError(f"RAFT weights not recognised: {path} ({exc}; expected {EXPECTED})") from exc
         variant = detect_variant(sd)
         if variant is None:
             raise FlowWeightsError(f"RAFT weights not recognised: {path} (no update-block GRU; expected {EXPECTED})")
-        loaded = _CACHE[key] = RaftWeights(layout, variant, sd, align)
+        loaded = _CACHE[key] = RaftWeights(layout, variant, sd, align, inference)
         log.info("loaded RAFT-%s weights (%s layout) from %s", variant, layout, path)
         return loaded
 
@@ -209,16 +219,22 @@ def clear_cache() -> None:
         _CACHE.clear()
 
 
-def flowgap_weights_record(model: torch.nn.Module, variant: str) -> dict:
-    """``model``'s weights as a flowgap-layout object (what :func:`save_flowgap_weights` writes)."""
-    return {"format": FORMAT_NAME, "version": FORMAT_VERSION, "variant": variant,
-            "upsample_align_corners": bool(model.config.upsample_align_corners),
-            "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()}}
+def flowgap_weights_record(model: torch.nn.Module, variant: str,
+                           inference: InferenceSettings | None = None) -> dict:
+    """``model``'s weights as a flowgap-layout object (what :func:`save_flowgap_weights` writes), with the
+    inference settings they are meant to run with when given."""
+    record = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "variant": variant,
+              "upsample_align_corners": bool(model.config.upsample_align_corners),
+              "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()}}
+    if inference is not None:
+        record["inference"] = inference.as_record()
+    return record
 
 
-def save_flowgap_weights(model: torch.nn.Module, path: str | Path, variant: str) -> Path:
-    """Write ``model``'s weights in the flowgap layout."""
+def save_flowgap_weights(model: torch.nn.Module, path: str | Path, variant: str,
+                         inference: InferenceSettings | None = None) -> Path:
+    """Write ``model``'s weights in the flowgap layout (with ``inference`` settings when given)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(flowgap_weights_record(model, variant), path)
+    torch.save(flowgap_weights_record(model, variant, inference), path)
     return path
