@@ -56,6 +56,15 @@ def _param(text: str) -> tuple[str, float]:
         raise argparse.ArgumentTypeError(f"{text!r} must look like NAME=VALUE, e.g. MIS_TAKEOFF_ALT=1.5") from None
 
 
+def wind_arg(text: str):
+    from sitl_vehicle.wind import parse_wind
+
+    try:
+        return parse_wind(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--wind {text!r} ")) from None
+
+
 def _address(text: str) -> tuple[str, int]:
     try:
         return parse_hostport(text)
@@ -83,6 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="start position NED in metres (default 0,0,0: on the ground at the origin)")
     sim.add_argument("--yaw", type=float, default=0.0, help="start heading in degrees (default 0: north)")
     sim.add_argument("--scene", help="scene name or path: load its collision geometry (default: ground only)")
+    sim.add_argument("--wind", type=wind_arg, default=None, metavar="MEAN,GUST[,FROM_DEG]",
+                     help="steady wind of MEAN m/s from FROM_DEG (clockwise from north; drawn from --seed when "
+                          "left out) with gusts of GUST m/s standard deviation (first-order Gauss-Markov, 2 s), "
+                          "acting through the airframe's drag; e.g. 3,1")
     sim.add_argument("--duration", type=float, help="stop after this many simulation seconds")
     sim.add_argument("--result", type=Path, help="write the ground-truth verdict JSON here at exit")
     sim.add_argument("--home", type=triple_arg, default=None, metavar="LAT,LON,ALT",
@@ -111,6 +124,8 @@ def config_from_args(args: argparse.Namespace) -> ServerConfig:
     vehicle = VehicleConfig(airframe=AIRFRAMES[args.airframe])
     if args.no_noise:
         vehicle = _replace(vehicle, noise=None)
+    if args.wind is not None:
+        vehicle = _replace(vehicle, wind=args.wind)
     home = Home(*args.home) if args.home else Home()
     return ServerConfig(
         vehicle=vehicle,

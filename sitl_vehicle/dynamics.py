@@ -9,7 +9,8 @@ integrated exactly (``m += (u - m)(1 - e^{-dt/tau})``) and the rotor forces are 
 mean over the step while the rigid body is integrated, so the RK4 stages share one force/torque
 evaluation. The quaternion is renormalised after every step.
 
-Forces: gravity ``+g`` on NED z, rotor thrust along body ``-z``, linear drag ``-c * v`` (world axes).
+Forces: gravity ``+g`` on NED z, rotor thrust along body ``-z``, linear drag ``-c * (v - wind)`` (world axes;
+``wind`` is the air's NED velocity, zero unless set, see :mod:`sitl_vehicle.wind`).
 
 Ground contact (ground is the plane z = 0, flying is z < 0): the vehicle centre never goes below
 z = 0. While in contact and the thrust cannot lift it (``g - T*R33/m >= 0``) the ground holds it:
@@ -58,6 +59,7 @@ class QuadDynamics:
         self.motor = [0.0, 0.0, 0.0, 0.0]
         self.on_ground = pz >= 0.0
         self.touchdown_speed_mps = 0.0
+        self.wind = (0.0, 0.0, 0.0)
         self.touchdown = False  # True in the step where a new ground contact began
         self.thrust_n = 0.0
         self.torque_nm = (0.0, 0.0, 0.0)
@@ -137,15 +139,16 @@ class QuadDynamics:
         g = GRAVITY
 
         px, py, pz, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz = self.x
+        ax, ay, az = self.wind
 
         def deriv(vx, vy, vz, qw, qx, qy, qz, wx, wy, wz):
             r13 = 2.0 * (qx * qz + qw * qy)
             r23 = 2.0 * (qy * qz - qw * qx)
             r33 = 1.0 - 2.0 * (qx * qx + qy * qy)
             return (
-                -fm * r13 - cx * vx,
-                -fm * r23 - cy * vy,
-                g - fm * r33 - cz * vz,
+                -fm * r13 - cx * (vx - ax),
+                -fm * r23 - cy * (vy - ay),
+                g - fm * r33 - cz * (vz - az),
                 0.5 * (-qx * wx - qy * wy - qz * wz),
                 0.5 * (qw * wx + qy * wz - qz * wy),
                 0.5 * (qw * wy - qx * wz + qz * wx),

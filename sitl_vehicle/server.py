@@ -137,6 +137,9 @@ class VehicleServer:
             "setpoints_received": self.interface.setpoints_received,
             "setpoints_rejected": self.interface.setpoints_rejected,
             "clock": "lockstep" if self.config.lockstep else "realtime",
+            "wind": None if sim.wind is None else {"mean_mps": sim.wind.config.mean_mps,
+                                                   "gust_mps": sim.wind.config.gust_mps,
+                                                   "from_deg": round(sim.wind.from_deg, 2)},
         }
 
     def write_result(self, path: Path) -> None:

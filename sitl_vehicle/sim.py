@@ -43,6 +43,7 @@ from sitl_vehicle.dynamics import QuadDynamics
 from sitl_vehicle.estimator import Estimator
 from sitl_vehicle.sensors import Imu, PoseSensor, SensorNoise
 from sitl_vehicle.trajectory import PlannerConfig, TrapezoidPlanner, VelocitySlew
+from sitl_vehicle.wind import WindConfig, WindModel
 
 __all__ = [
     "AIRFRAMES", "Airframe", "AttitudeSetpoint", "ControlConfig", "PlannerConfig", "SensorNoise", "Setpoint",
@@ -106,6 +107,7 @@ class VehicleConfig:
     planner: PlannerConfig = field(default_factory=PlannerConfig)  # trajectory limits
     noise: SensorNoise | None = field(default_factory=SensorNoise)  # None = estimate is exact truth
     crash_speed_mps: float = 2.0  # m/s, vertical touchdown speed above which a landing is a crash
+    wind: WindConfig | None = None  # steady wind and gusts on the vehicle (None or calm: still air)
 
 
 class VehicleSim:
@@ -126,6 +128,9 @@ class VehicleSim:
         self._inertia = af.inertia_kgm2
         self._thrust_full = 4.0 * af.thrust_max_n
         self._rng = rng if rng is not None else np.random.default_rng(0)
+        # Wind draws from a child of the seed, so that still air leaves every other draw as it was.
+        self.wind = (WindModel(config.wind, self._rng.spawn(1)[0])
+                     if config.wind is not None and not config.wind.calm else None)
         self.noise = config.noise
         self.pos_ctl = PositionControl()
         self.att_ctl = AttitudeControl()
@@ -370,6 +375,8 @@ class VehicleSim:
         else:
             self.motor_command = (0.0, 0.0, 0.0, 0.0)
 
+        if self.wind is not None:
+            dyn.wind = self.wind.velocity(self.time_s)
         dyn.step(self.motor_command)
         self._k = k + 1
         self.time_s = self._k * self.dt
