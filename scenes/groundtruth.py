@@ -7,6 +7,7 @@
   in front of the camera, and agrees with image 2's depth at that pixel (within ``depth_tol``, relative),
   so occluded and disoccluded pixels are invalid.
 * ``load_collision``: the vehicle's collision geometry (see :mod:`scenes.collision`).
+* ``corridor_clearance`` / ``passable_openings``: whether a body fits through an opening, flying along a heading.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from scenes.spec import SceneSpec
 from scenes.splats import LABEL_BACKGROUND, GaussianCloud
 
 __all__ = ["gap_mask", "gap_mask_from_labels", "flow_between", "flow_from_depth", "warp_backward",
-           "sample_pose_pair", "DEFAULT_PAIR_DISTANCE", "load_collision", "SceneCollision"]
+           "sample_pose_pair", "DEFAULT_PAIR_DISTANCE", "load_collision", "SceneCollision", "corridor_clearance",
+           "passable_openings"]
 
 
 def gap_mask_from_labels(label: np.ndarray) -> np.ndarray:
@@ -117,3 +119,33 @@ def sample_pose_pair(spec: SceneSpec, rng: np.random.Generator, max_step: float 
     att2 = np.asarray(att) + rng.uniform(-max_turn_rad, max_turn_rad, 3)
     p2 = Pose((float(x + step[0]), float(y + step[1]), float(z + step[2])), euler_to_quat(*att2))
     return p1, p2
+
+
+PASSABILITY_RESOLUTION_M = 0.005
+
+
+def corridor_clearance(spec: SceneSpec, index: int, heading_rad: float | None = None) -> float:
+    """Clear radius (m) of opening ``index`` for a body flying straight along ``heading_rad`` (NED yaw; default
+    the scene's start heading): the largest circle inside both the opening and its far edge as seen along the
+    heading, i.e. the opening intersected with itself shifted across by ``thickness·tan(heading)`` (exact to
+    :data:`PASSABILITY_RESOLUTION_M`)."""
+    heading = np.radians(spec.start_yaw_deg) if heading_rad is None else heading_rad
+    shift = spec.wall.thickness * float(np.tan(heading))
+    poly = np.asarray(spec.openings[index].polygon(), dtype=np.float64)
+    res = PASSABILITY_RESOLUTION_M
+    lo = poly.min(0) - 2 * res
+    size = np.ceil((poly.max(0) - lo + 2 * res) / res).astype(int) + 1 + int(np.ceil(abs(shift) / res))
+    grid = np.zeros((size[1], size[0]), np.uint8)
+    front = cv2.fillPoly(grid.copy(), [np.round((poly - lo) / res).astype(np.int32)], 1)
+    back = cv2.fillPoly(grid.copy(), [np.round((poly - lo - (shift, 0.0)) / res).astype(np.int32)], 1)
+    both = (front & back).astype(np.uint8)
+    if not both.any():
+        return 0.0
+    return float(cv2.distanceTransform(both, cv2.DIST_L2, cv2.DIST_MASK_PRECISE).max()) * res
+
+
+def passable_openings(spec: SceneSpec, body_radius_m: float, margin_m: float,
+                      heading_rad: float | None = None) -> list[bool]:
+    """Per opening: whether a sphere of ``body_radius_m`` with ``margin_m`` to spare on every side fits through
+    it flying along the heading (:func:`corridor_clearance`)."""
+    return [corridor_clearance(spec, i, heading_rad) >= body_radius_m + margin_m for i in range(len(spec.openings))]

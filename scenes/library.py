@@ -79,12 +79,20 @@ def random_opening(rng: np.random.Generator) -> OpeningSpec:
     return OpeningSpec("polygon", vertices=tuple((float(a), float(b)) for a, b in verts), frame_width=frame)
 
 
-def random_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES) -> SceneSpec:
+WORLDS = ("standard", "hard")
+
+
+def random_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES, world: str = "standard") -> SceneSpec:
     """A random wall-with-opening scene for training and Monte-Carlo flights (all draws from ``rng``).
 
     ``textures``: the families to draw from (the suite's four by default; RAFT training adds
-    ``scenes.spec.EXTRA_TEXTURES``).
+    ``scenes.spec.EXTRA_TEXTURES``).  ``world``: "standard" (one opening 0.75–1.1 m, the wall facing the start;
+    the same draws for a seed as ever) or "hard" (:func:`hard_scene`).
     """
+    if world == "hard":
+        return hard_scene(rng, textures)
+    if world != "standard":
+        raise ValueError(f"unknown world {world!r}; choose one of {WORLDS}")
     texture = str(rng.choice(list(textures)))
     seed = int(rng.integers(0, 2**31 - 1))
     distance = float(rng.uniform(2.5, 4.0))
@@ -100,3 +108,59 @@ def random_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES) -
                         tint=tuple(float(v) for v in rng.uniform(0.92, 1.08, 3)))
     return SceneSpec(name=f"random_{seed:010d}", wall=wall, openings=(random_opening(rng),), background=bg,
                      jitter=jitter)
+
+
+HARD_OPENING_SIZE = (0.3, 1.3)      # m, each side of a hard-world opening (some too small to pass)
+HARD_BACKGROUND_GAP = (0.6, 4.0)    # m behind the wall
+HARD_TURN_DEG = 20.0                # the wall turned up to this much against the start heading
+HARD_OPENINGS = (1, 3)
+HARD_SPACING_M = 0.4                # of wall between two openings' bounding boxes, at least
+
+
+def hard_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES) -> SceneSpec:
+    """A hard-world scene: 1–3 openings 0.3–1.3 m wide or high (some impassable), the wall turned up to ±20°
+    against the start heading (``start_yaw_deg``), the background 0.6–4 m behind it.  All draws from ``rng``."""
+    texture = str(rng.choice(list(textures)))
+    seed = int(rng.integers(0, 2**31 - 1))
+    distance = float(rng.uniform(2.5, 4.0))
+    wall = WallSpec(distance=distance, width=float(rng.uniform(6.5, 8.0)), height=4.0,
+                    thickness=float(rng.uniform(0.1, 0.25)), center_y=float(rng.uniform(-0.5, 0.5)),
+                    texture=texture, seed=seed, texture_scale=float(rng.uniform(0.8, 1.25)))
+    wanted = int(rng.integers(HARD_OPENINGS[0], HARD_OPENINGS[1] + 1))
+    openings: list[OpeningSpec] = []
+    boxes: list[tuple[float, float, float, float]] = []
+    for _ in range(40 * wanted):                    # rejection sampling, bounded
+        if len(openings) == wanted:
+            break
+        op = _hard_opening(rng)
+        ys, zs = zip(*op.polygon(), strict=True)
+        box = (min(ys), max(ys), min(zs), max(zs))
+        inside = (box[0] >= wall.center_y - wall.width / 2 + 0.3 and box[1] <= wall.center_y + wall.width / 2 - 0.3
+                  and box[2] >= -wall.height + 0.3 and box[3] <= -0.3)
+        apart = all(box[1] + HARD_SPACING_M <= b[0] or b[1] + HARD_SPACING_M <= box[0]
+                    or box[3] + HARD_SPACING_M <= b[2] or b[3] + HARD_SPACING_M <= box[2] for b in boxes)
+        if inside and apart:
+            openings.append(op)
+            boxes.append(box)
+    gap = float(rng.uniform(*HARD_BACKGROUND_GAP))
+    bg_scale = wall.texture_scale * (distance + wall.thickness + gap) / distance
+    bg = BackgroundSpec(gap=gap, width=wall.width + 1.0, height=4.5, seed=seed + 1, texture_scale=bg_scale)
+    jitter = JitterSpec(exposure=float(rng.uniform(0.8, 1.2)),
+                        tint=tuple(float(v) for v in rng.uniform(0.92, 1.08, 3)))
+    yaw = float(rng.uniform(-HARD_TURN_DEG, HARD_TURN_DEG))
+    return SceneSpec(name=f"hard_{seed:010d}", wall=wall, openings=tuple(openings), background=bg, jitter=jitter,
+                     start_yaw_deg=yaw)
+
+
+def _hard_opening(rng: np.random.Generator) -> OpeningSpec:
+    kind = str(rng.choice(["rect", "ellipse", "polygon"]))
+    w, h = (float(v) for v in rng.uniform(*HARD_OPENING_SIZE, 2))
+    cy, cz = float(rng.uniform(-1.6, 1.6)), float(rng.uniform(-2.0, -1.0))
+    frame = float(rng.uniform(0.03, 0.08)) if rng.random() < 0.3 else 0.0
+    if kind in ("rect", "ellipse"):
+        return OpeningSpec(kind, center=(cy, cz), size=(w, h), frame_width=frame)
+    n = int(rng.integers(5, 9))
+    ang = np.linspace(0, 2 * np.pi, n, endpoint=False) + rng.uniform(-0.25, 0.25, n)
+    rad = rng.uniform(0.85, 1.0, n)
+    verts = tuple((cy + w / 2 * r * np.cos(a), cz + h / 2 * r * np.sin(a)) for a, r in zip(ang, rad, strict=True))
+    return OpeningSpec("polygon", vertices=tuple((float(a), float(b)) for a, b in verts), frame_width=frame)

@@ -109,6 +109,9 @@ class SceneSpec:
     floor: FloorSpec = field(default_factory=FloorSpec)
     jitter: JitterSpec = field(default_factory=JitterSpec)
     density: SplatDensity = field(default_factory=SplatDensity)
+    # the heading the vehicle starts on, degrees clockwise from north (+x): a wall turned against it by this
+    # much (the hard world's turned walls); 0 faces the wall squarely
+    start_yaw_deg: float = 0.0
     version: int = SPEC_VERSION
 
     # --- derived geometry -------------------------------------------------------------------------
@@ -143,6 +146,9 @@ class SceneSpec:
                 raise SpecError(f"unknown texture {tex!r}; use one of {ALL_TEXTURES}")
         if self.wall.thickness <= 0 or self.wall.width <= 0 or self.wall.height <= 0:
             raise SpecError("wall width, height and thickness must be positive; fix the 'wall' block")
+        if not (math.isfinite(self.start_yaw_deg) and abs(self.start_yaw_deg) < 90):
+            raise SpecError(f"start_yaw_deg {self.start_yaw_deg} must be within ±90° (the wall must face the start); "
+                            "fix 'start_yaw_deg'")
         y_lo, y_hi = self.wall.center_y - self.wall.width / 2, self.wall.center_y + self.wall.width / 2
         for i, op in enumerate(self.openings):
             poly = op.polygon()
