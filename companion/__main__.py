@@ -58,6 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="camera-to-setpoint latency in seconds: the next waypoint goes out this long after its "
                         "frame, or when perception is done if later (in lockstep, what perception costs in "
                         "simulated time; default 0)")
+    p.add_argument("--camera-delay", type=float, default=0.0, metavar="S",
+                   help="the simulated camera's frames arrive S seconds after exposure, stamped with the exposure "
+                        "time (default 0)")
     p.add_argument("--run-dir", type=Path, help="run log directory (default runs/<time>)")
     p.add_argument("--no-images", action="store_true", help="do not save per-step PNGs (faster evaluations)")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
@@ -87,10 +90,11 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=args.log_level, format="%(asctime)s companion %(levelname)s %(message)s")
     run_dir = args.run_dir or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
-    if not (math.isfinite(args.latency) and args.latency >= 0):
-        print(f"flowgap-companion: error: --latency must be a number of seconds >= 0 (got {args.latency})",
-              file=sys.stderr)
-        return 2
+    for flag, value in (("--latency", args.latency), ("--camera-delay", args.camera_delay)):
+        if not (math.isfinite(value) and value >= 0):
+            print(f"flowgap-companion: error: {flag} must be a number of seconds >= 0 (got {value})",
+                  file=sys.stderr)
+            return 2
     if args.lockstep and args.link != "pymavlink":
         print(f"flowgap-companion: error: --lockstep needs --link pymavlink: the {args.link} link cannot run "
               f"in lockstep (mavsdk_server keeps its own wall-clock timers)", file=sys.stderr)
@@ -104,7 +108,8 @@ def main(argv: list[str] | None = None) -> int:
         from companion.camera import SplatCamera
 
         clock, poses = open_clock(args.truth, args.lockstep)
-        camera = SplatCamera(args.scene, poses, backend=args.render_backend)
+        camera = SplatCamera(args.scene, poses, backend=args.render_backend, clock=clock,
+                             delay_s=args.camera_delay)
     except (ValueError, KeyError, FileNotFoundError, OSError, LockstepError) as exc:
         print(f"flowgap-companion: error: {exc}", file=sys.stderr)
         _close(clock)
@@ -142,6 +147,11 @@ def main(argv: list[str] | None = None) -> int:
     summary = {"scene": args.scene, "flow": args.flow, "detector": args.detector, "link": args.link,
                "clock": clock.name, "latency_s": args.latency, **result.as_dict()}
     runlog.summary(summary)
+    push = f", pushed {result.push_length_m:.2f} m" if result.push_length_m else ""
+    board = runlog.storyboard(mission.storyboard.render(
+        [f"companion: {result.state.value.upper()}{push} after {result.servo_steps} servo steps"
+         + (f" ({result.reason})" if result.reason else "")]))
+    log.info("storyboard: %s", board)
     runlog.close()
     print(json.dumps({k: summary[k] for k in ("state", "reason", "servo_steps", "push_length_m")}))
     log.info("run log in %s", run_dir)

@@ -104,9 +104,12 @@ class TruthPoseListener:
 class SplatCamera:
     """Renders ``scene`` at the true pose: the simulated forward camera (optical axis = body x).
 
-    ``truth``: the ground-truth stream's URL (listened to in a thread) or a :class:`PoseSource`."""
+    ``truth``: the ground-truth stream's URL (listened to in a thread) or a :class:`PoseSource`.  ``delay_s``:
+    each frame reaches the caller this long after its exposure, on ``clock`` (the companion's; a real camera's
+    frames arrive late too), stamped with the exposure's time."""
 
-    def __init__(self, scene: str, truth: str | PoseSource, backend: str = "cpu", camera=None):
+    def __init__(self, scene: str, truth: str | PoseSource, backend: str = "cpu", camera=None, clock=None,
+                 delay_s: float = 0.0):
         from scenes import PinholeCamera, load_scene
 
         self.spec, self.cloud = load_scene(scene)
@@ -120,14 +123,22 @@ class SplatCamera:
 
         render_splats(self.cloud, self.camera, Pose((0.0, 0.0, -1.5), (1.0, 0.0, 0.0, 0.0)), backend=backend)
         self.poses = TruthPoseListener(truth) if isinstance(truth, str) else truth
+        self.delay_s = float(delay_s)
+        if self.delay_s > 0 and clock is None:
+            raise ValueError("a camera delay needs the companion's clock to wait on")
+        self.clock = clock
 
     def capture(self) -> Frame:
         from scenes import Pose, render_splats
 
         t0 = time.perf_counter()
+        exposed = self.clock.now() if self.delay_s > 0 else 0.0
         stamp, position, attitude = self.poses.latest()
         result = render_splats(self.cloud, self.camera, Pose(position, attitude), backend=self.backend)
-        return Frame(result.rgb, position, attitude, stamp, (time.perf_counter() - t0) * 1000)
+        capture_ms = (time.perf_counter() - t0) * 1000
+        if self.delay_s > 0:
+            self.clock.sleep_until(exposed + self.delay_s)
+        return Frame(result.rgb, position, attitude, stamp, capture_ms)
 
     def close(self) -> None:
         self.poses.close()

@@ -19,6 +19,7 @@ Both take an H×W×2 float flow (u right, v down, pixels) and return a frozen :c
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -37,6 +38,9 @@ class GapDetection:
     ``mask``: H×W bool, True inside the gap (all False when none).  ``centroid``: (u, v) pixels or None.
     ``area``: contour area in pixels² (0 when none).  ``contour``: N×2 int32 (x, y) polygon or None.
     ``reason``: why there is no gap (None when there is one).  ``detector``: which detector answered.
+    ``clear_centre``/``clear_radius_px``: the centre and radius (pixels) of the largest circle inside the mask
+    (its pole of inaccessibility): the point a body must aim at to clear the nearest edge by the most, which
+    for an irregular or clipped opening is not its centroid.
     """
 
     mask: np.ndarray
@@ -45,6 +49,10 @@ class GapDetection:
     contour: np.ndarray | None
     reason: str | None = None
     detector: str = ""
+    clear_centre: tuple[float, float] | None = None
+    clear_radius_px: float = 0.0
+    # every opening the detector found (this one first), for a caller that must choose among several
+    candidates: tuple[GapDetection, ...] = ()
 
     @property
     def found(self) -> bool:
@@ -59,6 +67,23 @@ def _no_gap(shape: tuple[int, int], reason: str, detector: str) -> GapDetection:
     return GapDetection(np.zeros(shape, dtype=bool), None, 0.0, None, reason, detector)
 
 
+def clear_circle(mask: np.ndarray) -> tuple[tuple[float, float] | None, float]:
+    """Centre (u, v) and radius in pixels of the largest circle inside a binary ``mask`` (its pole of
+    inaccessibility, from the Euclidean distance transform); the frame's border counts as an edge, since
+    nothing is known beyond it.  (None, 0.0) for an empty mask."""
+    m = np.zeros((mask.shape[0] + 2, mask.shape[1] + 2), np.uint8)
+    m[1:-1, 1:-1] = mask.astype(bool)
+    dist = cv2.distanceTransform(m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
+    radius = float(dist.max())
+    if radius <= 0:
+        return None, 0.0
+    # the middle of the plateau of largest distance (a rectangle's is a segment, not a point): its point
+    # nearest the plateau's mean, which for a bent plateau may lie outside it
+    ys, xs = np.nonzero(dist >= radius - 0.5)
+    i = int(np.argmin((xs - xs.mean()) ** 2 + (ys - ys.mean()) ** 2))
+    return (float(xs[i]), float(ys[i])), radius
+
+
 def _from_contour(shape: tuple[int, int], contour: np.ndarray, detector: str) -> GapDetection:
     mask = np.zeros(shape, dtype=np.uint8)
     cv2.drawContours(mask, [contour], -1, 1, thickness=cv2.FILLED)
@@ -69,8 +94,10 @@ def _from_contour(shape: tuple[int, int], contour: np.ndarray, detector: str) ->
         mm = cv2.moments(mask, binaryImage=True)
         centroid = (mm["m10"] / mm["m00"], mm["m01"] / mm["m00"])
     polygon = contour.reshape(-1, 2).astype(np.int32)
+    centre, radius = clear_circle(mask)
     return GapDetection(mask.astype(bool), (float(centroid[0]), float(centroid[1])),
-                        float(cv2.contourArea(contour)), polygon, None, detector)
+                        float(cv2.contourArea(contour)), polygon, None, detector,
+                        centre if centre is not None else (float(centroid[0]), float(centroid[1])), radius)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -311,7 +338,7 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
         cv2.MORPH_ELLIPSE, (config.close_ksize, config.close_ksize)))
     contours, _ = cv2.findContours(far, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     a_min, a_max = config.area_min_frac * h * w, config.area_max_frac * h * w
-    best, best_score = None, 0.0
+    scored = []
     for c in contours:
         area = cv2.contourArea(c)
         if not a_min <= area <= a_max:
@@ -321,13 +348,13 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
         touches = bool(on_border.any())
         if touches and (area < config.border_min_frac * h * w or on_border.mean() > config.max_border_frac):
             continue
-        score = area * (config.border_penalty if touches else 1.0)
-        if score > best_score:
-            best, best_score = c, score
-    if best is None:
+        scored.append((area * (config.border_penalty if touches else 1.0), c))
+    if not scored:
         return _no_gap((h, w), f"no far region with {a_min:.0f} <= area <= {a_max:.0f} px² enclosed by a "
                                "nearer surface", det)
-    return _from_contour((h, w), cv2.approxPolyDP(best, 0.5, True), det)
+    scored.sort(key=lambda sc: -sc[0])
+    found = [_from_contour((h, w), cv2.approxPolyDP(c, 0.5, True), det) for _, c in scored]
+    return dataclasses.replace(found[0], candidates=tuple(found))
 
 
 DETECTORS = {"paper": detect_gap, "parallax": detect_gap_parallax}

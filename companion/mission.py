@@ -9,6 +9,7 @@ FAILED with the reason, after asking the vehicle to hold (or land) where it can.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import logging
 import math
@@ -20,16 +21,22 @@ import numpy as np
 from companion.camera import CameraError, FrameSource
 from companion.flow.colour import flow_to_colour
 from companion.link.base import AutopilotLink, LinkError, LinkLost
+from companion.motion import tilted_pixel
+from companion.opening import OpeningConfig, OpeningTracker, candidates_in
 from companion.perception import perceive
 from companion.runlog import RunLog
 from companion.servo import (
     ServoConfig,
+    far_distance_from_flow,
     heading_to_ned,
+    metric_step,
+    normalised_error,
     push_length,
     push_waypoints,
     servo_step,
     wall_distance_from_flow,
 )
+from companion.storyboard import Storyboard, StoryRow, step_text
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
 
 log = logging.getLogger(__name__)
@@ -46,6 +53,7 @@ class State(enum.Enum):
     HOLD = "hold"
     LAND = "land"
     DONE = "done"
+    REFUSED = "refused"
     FAILED = "failed"
 
 
@@ -76,6 +84,7 @@ class MissionResult:
     servo_steps: int = 0
     states: list[tuple[float, str]] = field(default_factory=list)
     wall_distance_m: float | None = None
+    far_distance_m: float | None = None
     push_length_m: float | None = None
 
     def as_dict(self) -> dict:
@@ -87,7 +96,8 @@ class MissionResult:
 class Mission:
     def __init__(self, link: AutopilotLink, camera: FrameSource, flow, detector, runlog: RunLog,
                  servo: ServoConfig | None = None, config: MissionConfig | None = None,
-                 tracker: CentroidFilter | None = None, derotate_flow: bool = True):
+                 tracker: CentroidFilter | None = None, derotate_flow: bool = True,
+                 openings: OpeningConfig | None = None):
         self.link = link
         self.camera = camera
         self.flow = flow
@@ -96,8 +106,14 @@ class Mission:
         self.servo = servo or ServoConfig()
         self.config = config or MissionConfig()
         self.tracker = tracker or ConfirmingCentroidFilter()
+        # Once the wall's distance is known, the opening's clear centre is tracked where it is in the world
+        # (companion.opening): a frame without a detection then steers by the vehicle's own motion instead of
+        # repeating the last step (measured: re-applied 0.25 m steps towards a stale image position ran a
+        # vehicle 2 m sideways).
+        self.openings = openings or OpeningConfig()
         self.derotate = derotate_flow
         self.result = MissionResult(State.CONNECT)
+        self.storyboard = Storyboard()   # what it saw and decided, step by step (companion.storyboard)
         self.clock = link.clock     # every wait and timeout on the link's clock (wall, or lockstep)
         self._t0 = time.monotonic()
         self._t0_clock = self.clock.now()
@@ -126,7 +142,7 @@ class Mission:
             self._enter(State.SERVO)
             waypoint, bias, wall_distance = self._servo(start)
             self._enter(State.TRAVERSE)
-            self._traverse(waypoint, bias, wall_distance)
+            self._traverse(waypoint, bias, wall_distance, self.result.far_distance_m)
             if self.config.finish == "land":
                 self._enter(State.LAND)
                 self.link.land()
@@ -135,6 +151,8 @@ class Mission:
                 self._enter(State.HOLD)
                 self.link.hold()
             self._enter(State.DONE)
+        except Refusal as exc:
+            self._refuse(str(exc))
         except LinkLost as exc:
             self._fail(f"link lost: {exc}", safe=False)
         except (LinkError, CameraError, NoGapError) as exc:
@@ -157,6 +175,10 @@ class Mission:
         step = servo_step(None, 0.0, 0, width, height, cfg)
         wall_distance = None
         wall_estimates: list[float] = []  # forward coordinate of the wall, one per measurement
+        rough_estimates: list[float] = []  # ... and from frames without a gap too (a safety bound only)
+        far_estimates: list[float] = []   # ... and of the far surface seen through the opening
+        openings = OpeningTracker(cfg, self.openings, self.tracker)
+        focal = float(self.camera.K[0, 0])
         ever_seen = False
         for k in range(cfg.step_budget):
             t_step = self.clock.now()
@@ -175,41 +197,81 @@ class Mission:
             position = self.link.telemetry.position
             seen = perceive(prev.rgb, frame.rgb, prev_attitude, attitude, self.camera.K, self.flow, self.detector,
                             self.derotate)
-            flow, detection, level = seen.flow, seen.detection, seen.level_centroid
+            flow, top = seen.flow, seen.detection
             self._log_frame(k + 1, frame, position, attitude)
-            used = self.tracker.update(level)
-            ever_seen |= detection.centroid is not None
-            area_frac = detection.area / float(width * height) if detection.centroid is not None else 0.0
+            candidates = candidates_in(top, self.camera.K, attitude)
+            found = [c.detection for c in candidates]
             moved = math.dist(prev_position, position)
-            # Only with a detected gap: its mask keeps the far pixels out of the wall's depth statistic
-            # (measured: without one, readings of 0.7–0.9 m for a wall 2.8 m away pushed far too early).
-            measured = (wall_distance_from_flow(flow, detection.mask, moved)
-                        if detection.centroid is not None else None)
+            # Only with a detected gap: its mask (every opening's) keeps the far pixels out of the wall's depth
+            # statistic (measured: without one, readings of 0.7–0.9 m for a wall 2.8 m away pushed far too early).
+            measured = (wall_distance_from_flow(flow, np.logical_or.reduce([d.mask for d in found]), moved)
+                        if found else None)
             if measured is not None and not 0.3 <= measured <= 10.0:
                 measured = None
             here = self._forward(position)
             if measured is not None:
                 wall_estimates.append(here + measured)
+            # Without a gap the wall is still measured, for one purpose only: not to walk into it blind.
+            rough = measured if found else wall_distance_from_flow(flow, None, moved)
+            if rough is not None and 0.3 <= rough <= 10.0:
+                rough_estimates.append(here + rough)
             # Each measurement places the wall in the world; their median is robust to the bad ones, and
             # the distance ahead follows the vehicle's own motion between measurements.
             # A distance enters the push decision only once three measurements agree on a median.
             enough = len(wall_estimates) >= self.config.min_wall_measurements
             wall_distance = float(np.median(wall_estimates)) - here if enough else None
-            next_step = servo_step(used, area_frac if used is not None else 0.0, k + 1, width, height, cfg,
-                                   wall_distance)
+            axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), self.camera.K, attitude[0], attitude[1])
+            sight = openings.observe(candidates, self._across(position), wall_distance, focal, width, height, axis)
+            if sight.note:
+                log.info("%s", sight.note)
+            if sight.refusal:
+                raise Refusal(sight.refusal)
+            detection = sight.detection if sight.detection is not None else top
+            used = sight.target_px
+            ever_seen |= bool(found)
+            area_frac = detection.area / float(width * height) if detection.found else 0.0
+            far = (far_distance_from_flow(flow, detection.mask, moved)
+                   if sight.detection is not None and openings.last_accepted else None)
+            if far is not None and (measured is None or far > measured) and far <= 20.0:
+                far_estimates.append(here + far)
+            ahead = wall_distance
+            if ahead is None and len(rough_estimates) >= self.config.min_wall_measurements:
+                ahead = float(np.median(rough_estimates[-self.config.min_wall_measurements:])) - here
+            if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
+                raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on")
+            if sight.offset_m is None:
+                next_step = servo_step(used, area_frac if used is not None else 0.0, k + 1, width, height, cfg,
+                                       wall_distance)
+                if used is None:     # blind: a new parallax baseline, but no push, nor closer than the hold
+                    forward = next_step.delta_heading[0]
+                    if ahead is not None:
+                        forward = min(forward, max(0.0, ahead - cfg.hold_distance_m))
+                    next_step = dataclasses.replace(next_step, delta_heading=(forward, 0.0, 0.0), push=False)
+            else:
+                next_step = metric_step(sight.offset_m, sight.clear_radius_m, wall_distance, area_frac, k + 1, cfg,
+                                        normalised_error(used, width, height), sight.clearance_here_m)
             self.clock.sleep_until(t_frame + self.config.perception_latency_s)
             self.result.servo_steps = k + 1
-            self.runlog.save_images(k + 1, rgb=frame.rgb, flow_bgr=flow_to_colour(flow, bgr=True),
-                                    mask=detection.mask)
+            flow_bgr = flow_to_colour(flow, bgr=True)
+            self.runlog.save_images(k + 1, rgb=frame.rgb, flow_bgr=flow_bgr, mask=detection.mask)
+            state = ("push" if next_step.push else "aligned" if next_step.aligned else
+                     "close" if next_step.close else "servo") + (f"; {sight.note}" if sight.note else "")
+            self.storyboard.add(StoryRow(
+                k + 1, frame.rgb, flow_bgr[:, :, ::-1], detection.mask, detection.centroid,
+                None if used is None else tilted_pixel(used, self.camera.K, attitude[0], attitude[1]),
+                step_text(k + 1, next_step.error, next_step.delta_heading, wall_distance, state)))
             self.runlog.decision({
                 "step": k + 1, "t_wall_s": time.monotonic() - self._t0, "t_clock_s": self.clock.now() - self._t0_clock,
                 "frame_time_s": frame.time_s,
                 "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
-                "centroid_raw": detection.centroid, "centroid_level": level, "centroid_used": used,
+                "centroid_raw": detection.centroid, "openings": len(found), "centroid_used": used,
+                "clear_radius_m": sight.clear_radius_m, "clearance_here_m": sight.clearance_here_m,
+                "note": sight.note,
                 "attitude_est": attitude, "accepted": self.tracker.last_accepted,
                 "no_gap_reason": detection.reason, "area_frac": area_frac,
                 "error": next_step.error, "next_delta_heading": next_step.delta_heading, "close": next_step.close,
-                "push": next_step.push, "wall_distance_m": measured,
+                "push": next_step.push, "wall_distance_m": measured, "far_distance_m": far,
+                "offset_m": next_step.offset_m, "tolerance_m": next_step.tolerance_m, "aligned": next_step.aligned,
                 "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": seen.flow_ms,
                            "detect_ms": seen.detect_ms},
             })
@@ -221,9 +283,17 @@ class Mission:
             prev, prev_attitude, prev_position, step = frame, attitude, position, next_step
             if next_step.push:
                 break
+        else:
+            if step.aligned is False:     # the metric law would not push a sphere that would not clear
+                raise Refusal(f"could not centre on the opening within {cfg.step_budget} steps (still "
+                              f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed): "
+                              "not flying through")
         self.result.wall_distance_m = wall_distance
+        here = self._forward(prev_position)
         if wall_distance is None and wall_estimates:  # fewer than the minimum: still better than nothing
-            wall_distance = float(np.median(wall_estimates)) - self._forward(prev_position)
+            wall_distance = float(np.median(wall_estimates)) - here
+        if far_estimates:
+            self.result.far_distance_m = float(np.median(far_estimates)) - here
         return waypoint, step.delta_heading[1:], wall_distance
 
     def _settle(self) -> None:
@@ -243,11 +313,15 @@ class Mission:
         """Coordinate along the initial heading (the direction of travel toward the wall)."""
         return position[0] * math.cos(self.yaw) + position[1] * math.sin(self.yaw)
 
-    def _traverse(self, start, bias, wall_distance) -> None:
-        length = push_length(wall_distance, self.servo)
+    def _across(self, position) -> tuple[float, float]:
+        """Coordinates across the initial heading: (right of it, down), metres."""
+        return -position[0] * math.sin(self.yaw) + position[1] * math.cos(self.yaw), position[2]
+
+    def _traverse(self, start, bias, wall_distance, far_distance=None) -> None:
+        length = push_length(wall_distance, self.servo, far_distance)
         self.result.push_length_m = length
-        log.info("traversal: %.2f m forward in %.2f m increments (wall measured at %s m)", length,
-                 self.servo.push_increment_m, _fmt(wall_distance))
+        log.info("traversal: %.2f m forward in %.2f m increments (wall measured at %s m, beyond it %s m)", length,
+                 self.servo.push_increment_m, _fmt(wall_distance), _fmt(far_distance))
         points = push_waypoints(start, self.yaw, length, bias, self.servo)
         period = 1.0 / 20.0  # one increment per setpoint period: ~1 m/s, level
         for p in points:
@@ -261,6 +335,16 @@ class Mission:
         self.result.state = state
         self.result.states.append((round(self.clock.now() - self._t0_clock, 3), state.value))
         log.info("state: %s", state.value.upper())
+
+    def _refuse(self, reason: str) -> None:
+        """Decline the opening: hold where the vehicle is, and say why (a refused flight touches nothing)."""
+        log.warning("refused in %s: %s", self.result.state.value.upper(), reason)
+        self.result.reason = reason
+        self._enter(State.REFUSED)
+        try:
+            self.link.hold()
+        except LinkError as exc:
+            log.error("could not command Hold after refusing: %s", exc)
 
     def _fail(self, reason: str, safe: bool) -> None:
         log.error("mission failed in %s: %s", self.result.state.value.upper(), reason)
@@ -276,6 +360,11 @@ class Mission:
 
 class NoGapError(RuntimeError):
     """The detector never found a gap within the allowed number of frames."""
+
+
+class Refusal(RuntimeError):
+    """The companion declines to fly through (an opening too small, or one it cannot centre on); the reason
+    names the numbers behind the decision."""
 
 
 def _fmt(value) -> str:

@@ -59,3 +59,16 @@ def level_pixel(pixel: tuple[float, float], K: np.ndarray, roll: float, pitch: f
         return float(pixel[0]), float(pixel[1])
     p = K @ (ray_level / ray_level[2])
     return float(p[0]), float(p[1])
+
+
+def tilted_pixel(pixel: tuple[float, float], K: np.ndarray, roll: float, pitch: float,
+                 camera_from_body: np.ndarray = CAMERA_FROM_BODY) -> tuple[float, float]:
+    """The inverse of :func:`level_pixel`: where a pixel of the level camera appears to the tilted one (the
+    heading's axis, the level image's centre, is where the vehicle would fly if it moved straight on)."""
+    ray_level = np.linalg.inv(K) @ np.array([pixel[0], pixel[1], 1.0])
+    level_from_body = body_to_world_from_euler(roll, pitch, 0.0)
+    ray_cam = camera_from_body @ level_from_body.T @ camera_from_body.T @ ray_level
+    if ray_cam[2] <= 1e-9:
+        return float(pixel[0]), float(pixel[1])
+    p = K @ (ray_cam / ray_cam[2])
+    return float(p[0]), float(p[1])

@@ -13,8 +13,8 @@ from companion.jsonsafe import json_safe
 
 class RunLog:
     """Layout: ``link.tlog``, ``frames/NNN.png``, ``flow/NNN.png``, ``masks/NNN.png``, ``decisions.jsonl``,
-    ``frames.jsonl`` (each frame's true and estimated pose, for replay), ``summary.json``. Image saving can
-    be switched off for evaluation runs (``images=False``)."""
+    ``frames.jsonl`` (each frame's true and estimated pose, for replay), ``summary.json``, ``storyboard.png``.
+    Step images can be switched off for evaluation runs (``images=False``); the storyboard is always written."""
 
     def __init__(self, run_dir: Path, images: bool = True):
         self.dir = Path(run_dir)
@@ -49,6 +49,14 @@ class RunLog:
         # difference into a different centroid.
         self._frames.write(json.dumps(json_safe(record)) + "\n")
         self._frames.flush()
+
+    def storyboard(self, image_rgb: np.ndarray) -> Path:
+        """``storyboard.png`` (written whether or not step images are)."""
+        from companion.storyboard import save
+
+        path = self.dir / "storyboard.png"
+        save(image_rgb, path)
+        return path
 
     def summary(self, record: dict) -> None:
         (self.dir / "summary.json").write_text(json.dumps(json_safe(record, 5), indent=2) + "\n")

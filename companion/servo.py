@@ -42,6 +42,19 @@ class ServoConfig:
     push_max_beyond_wall_m: float = 1.2  # never push further than this past the wall (scenes put a background
                                          # surface 2 m behind it; a real room has one too)
     wall_thickness_m: float = 0.15  # assumed wall depth for the push length (suite walls are 0.15 m)
+    # Metric alignment (ours), once the wall's distance Z is measured: the target's pixel offset times Z/f is
+    # the body's lateral and vertical offset from the opening's clear centre in metres; the paper's κ·e is a
+    # fixed fraction of it whatever the distance, too slow close to the wall (an opening 0.9 m to the side
+    # was still 0.27 m off when the wall came within reach, and the push met its edge).
+    body_radius_m: float = 0.19  # the vehicle's collision sphere (quad250's: 0.38 m across, props included)
+    clearance_margin_m: float = 0.05  # kept free between the sphere and the opening's edge, each side
+    metric_gain: float = 0.7  # fraction of the metric offset removed per step
+    metric_max_step_m: float = 0.25  # |Δy|, |Δz| limit of a metric step
+    metric_slowdown_m: float = 0.5  # the forward step shrinks as the offset grows toward this (to the minimum
+                                    # fraction above)
+    hold_distance_m: float = 1.1  # misaligned, the vehicle moves no closer than this to the wall; it centres
+                                  # first, then pushes (the paper pushes whatever the centring)
+    far_margin_m: float = 0.15  # the push stops this short of the far surface seen through the opening (ours)
 
 
 @dataclass(frozen=True)
@@ -52,6 +65,22 @@ class ServoStep:
     error: tuple[float, float] | None  # (e_u, e_v), None without a centroid
     close: bool
     push: bool  # time to stop servoing and traverse
+    offset_m: tuple[float, float] | None = None  # metric (right, down) offset of the target, when measured
+    tolerance_m: float | None = None  # how far off the target the sphere still clears the edges (< 0: cannot)
+    aligned: bool | None = None  # metric law: the sphere would clear the edges now (None: not measured)
+
+
+def metric_offset(error: tuple[float, float], width: int, height: int, focal_px: float,
+                  distance_m: float) -> tuple[float, float]:
+    """Metres right and down from the camera axis to the target at depth ``distance_m``: pixel offset · Z/f."""
+    e_u, e_v = error
+    return e_u * (width / 2) * distance_m / focal_px, e_v * (height / 2) * distance_m / focal_px
+
+
+def alignment_tolerance(clear_radius_m: float, config: ServoConfig) -> float:
+    """How far (m) the body's centre may be from the clear centre with the sphere still clearing every edge by
+    the margin: the opening's clear radius less the body radius and the margin (negative: it cannot pass)."""
+    return clear_radius_m - config.body_radius_m - config.clearance_margin_m
 
 
 def normalised_error(centroid: tuple[float, float], width: int, height: int) -> tuple[float, float]:
@@ -63,7 +92,8 @@ def normalised_error(centroid: tuple[float, float], width: int, height: int) -> 
 def servo_step(centroid: tuple[float, float] | None, area_frac: float, step_index: int, width: int,
                height: int, config: ServoConfig = ServoConfig(), wall_distance_m: float | None = None) -> ServoStep:
     """The paper's law with our corrected sign: Δp = [δ_f, κ_y·e_u, κ_z·e_v], clamped; forward only without
-    a centroid (new parallax baseline). ``step_index`` counts the steps already taken."""
+    a centroid (new parallax baseline). ``step_index`` counts the steps already taken.  Once the wall's
+    distance is measured the mission flies :func:`metric_step` instead."""
     budget_spent = step_index + 1 >= config.step_budget
     near = wall_distance_m is not None and wall_distance_m <= config.last_call_distance_m
     forward = config.forward_step_m
@@ -85,19 +115,58 @@ def servo_step(centroid: tuple[float, float] | None, area_frac: float, step_inde
     return ServoStep((forward, dy, dz), (e_u, e_v), close, push)
 
 
+def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m: float, area_frac: float,
+                step_index: int, config: ServoConfig = ServoConfig(),
+                error: tuple[float, float] | None = None, clearance_here_m: float | None = None) -> ServoStep:
+    """One step of the metric law, from the body's (right, down) offset to the opening's clear centre in
+    metres and the opening's clear radius: remove ``metric_gain`` of the offset (clamped), move forward less
+    the further off it is, never closer than ``hold_distance_m`` while the sphere would not clear the edges,
+    and push once it would (and the wall is close, or the opening large, or the step budget spent; never
+    while it would not: ``aligned`` tells the caller).  Whether it would: from ``clearance_here_m``, the
+    distance from the heading's axis to the opening's nearest edge seen in this frame, when there is one (an
+    elongated opening leaves room along its length), else from the offset and the clear radius.  ``error``:
+    the image error, for the record."""
+    budget_spent = step_index + 1 >= config.step_budget
+    tolerance = alignment_tolerance(clear_radius_m, config)
+    limit = config.metric_max_step_m
+    dy = float(np.clip(config.metric_gain * offset_m[0], -limit, limit))
+    dz = float(np.clip(config.metric_gain * offset_m[1], -limit, limit))
+    off = math.hypot(*offset_m)
+    if clearance_here_m is not None:
+        aligned = 0.0 <= tolerance and alignment_tolerance(clearance_here_m, config) >= 0.0
+    else:
+        aligned = 0.0 <= tolerance and off <= tolerance
+    forward = config.forward_step_m * float(np.clip(1.0 - off / config.metric_slowdown_m,
+                                                    config.min_forward_frac, 1.0))
+    if not aligned:
+        forward = min(forward, max(0.0, distance_m - config.hold_distance_m))
+    close = area_frac >= config.close_area_frac or distance_m <= config.close_distance_m
+    large = area_frac >= config.push_area_frac or distance_m <= config.push_distance_m
+    push = aligned and (large or budget_spent)
+    return ServoStep((forward, dy, dz), error, close, push, (float(offset_m[0]), float(offset_m[1])), tolerance,
+                     aligned)
+
+
 def heading_to_ned(delta: tuple[float, float, float], yaw: float) -> tuple[float, float, float]:
     f, r, d = delta
     c, s = math.cos(yaw), math.sin(yaw)
     return (c * f - s * r, s * f + c * r, d)
 
 
-def push_length(wall_distance_m: float | None, config: ServoConfig = ServoConfig()) -> float:
+def push_length(wall_distance_m: float | None, config: ServoConfig = ServoConfig(),
+                far_distance_m: float | None = None) -> float:
     """How far to traverse: past the wall's back face by the margin, bounded so as not to fly on into
-    whatever stands behind the opening."""
+    whatever stands behind the opening: with the far surface's distance measured, the push ends with the
+    body sphere ``far_margin_m`` short of it (but never short of the wall's front face plus the body's
+    radius, which the crossing needs)."""
     if wall_distance_m is None or not math.isfinite(wall_distance_m) or wall_distance_m <= 0:
         return config.push_default_m
     beyond = min(config.push_margin_m, config.push_max_beyond_wall_m)
-    return wall_distance_m + config.wall_thickness_m + beyond
+    length = wall_distance_m + config.wall_thickness_m + beyond
+    if far_distance_m is not None and math.isfinite(far_distance_m):
+        stop = far_distance_m - config.body_radius_m - config.far_margin_m
+        length = max(min(length, stop), wall_distance_m + config.body_radius_m)
+    return length
 
 
 def push_waypoints(start: tuple[float, float, float], yaw: float, length_m: float,
@@ -115,6 +184,26 @@ def push_waypoints(start: tuple[float, float, float], yaw: float, length_m: floa
         p = (p[0] + step[0], p[1] + step[1], p[2] + step[2])
         points.append(p)
     return points
+
+
+def far_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray, translation_m: float,
+                           erode_px: int = 4) -> float | None:
+    """Metric distance to the far surface seen through the opening, by the same parallax as the wall's:
+    Z = |T|/ρ with ρ the median relative inverse depth inside the gap mask (shrunk by ``erode_px`` so that
+    the wall's flow at its edge stays out).  None when too little of the mask is measurable."""
+    import cv2
+
+    from companion.gap import inverse_depth_from_flow
+
+    if translation_m <= 1e-3 or gap_mask is None:
+        return None
+    inner = cv2.erode(gap_mask.astype(np.uint8), np.ones((2 * erode_px + 1,) * 2, np.uint8)).astype(bool)
+    rho, valid = inverse_depth_from_flow(flow)
+    keep = inner & valid & np.isfinite(rho) & (rho > 0)
+    if keep.sum() < 30:
+        return None
+    rho_far = float(np.median(rho[keep]))
+    return translation_m / rho_far if rho_far > 0 else None
 
 
 def wall_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, translation_m: float,

@@ -77,6 +77,10 @@ class ConfirmingCentroidFilter(CentroidFilter):
         super().reset()
         self._candidates = []
 
+    def seed(self, c: Centroid) -> None:
+        """Start from ``c`` as the used centroid (carried over from another filter, already confirmed)."""
+        self._used, self._candidates = (float(c[0]), float(c[1])), []
+
     def update(self, c_k: Centroid | None) -> Centroid | None:
         if c_k is not None and not (math.isfinite(c_k[0]) and math.isfinite(c_k[1])):
             c_k = None

@@ -1,11 +1,20 @@
 """``flowgap-eval-flights``: closed-loop success rate over the scene suite from randomised starts.
 
 Each flight is a full two-process SITL run (``tools.launch.launch``): the vehicle judges it from its own
-ground truth. Starts are drawn from a seeded generator: lateral offset and altitude offset up to ±0.5 m,
-distance to the wall 2–4 m. ``--random N`` evaluates N random scenes (``scenes.random_scene``: texture,
-opening shape, size and place, wall and background distances; drawn from ``--seed``) instead of, or besides,
-named ones; their specs are saved under ``OUT/scenes`` so any flight can be re-flown with ``flowgap-sitl
+ground truth. A flight's draws (start, the vehicle's noise seed, and in the hard world wind and camera delay)
+come from ``default_rng([seed, crc32(scene), start index])``, so they depend only on those three. Standard
+world: lateral and altitude offsets up to ±0.5 m, 2–4 m from the wall. ``--random N`` evaluates N random scenes
+(``scenes.random_scene``: texture, opening shape, size and place, wall and background distances; drawn from
+``--seed``) instead of, or besides, named ones; ``--world hard`` draws hard-world scenes (1–3 openings of
+0.3–1.3 m, some impassable, the wall turned up to ±20°, the background 0.6–4 m behind) and flies them from
+lateral offsets up to ±1 m, in wind of up to 3 m/s with gusts up to 1 m/s, with camera frames arriving 30–80 ms
+after exposure. Their specs are saved under ``OUT/scenes`` so any flight can be re-flown with ``flowgap-sitl
 --scene OUT/scenes/NAME.json``. Several flights run at once on their own ports (PX4 instance numbers).
+
+Each row says whether the scene had an opening the vehicle fits through (``passable``: its body sphere plus
+the margin, flying along its heading, ``scenes.groundtruth.passable_openings``) and whether the companion
+declined (``refused``: it held, and the vehicle touched nothing). A flight succeeds when it crossed the wall
+through an opening without touching anything, or, where no opening was passable, when it refused.
 Flights run in lockstep (the vehicle advances only when its companion waits), so the same seed gives the same
 rows at any machine load, as fast as the CPU allows; ``--realtime`` paces them by ``--speed`` instead.
 Writes ``flights.json`` (rows + summary) and ``flights.md``, and prints the table.
@@ -16,9 +25,11 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import queue
 import sys
 import time
+import zlib
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
@@ -30,26 +41,77 @@ from tools.launch import launch
 log = logging.getLogger("flowgap-eval-flights")
 
 
-def draw_starts(rng: np.random.Generator, k: int, wall_x: float, altitude: float) -> list[tuple]:
-    """k starts (x, y, 0) on the ground with a takeoff altitude each: 2–4 m from the wall, ±0.5 m offsets."""
+BODY_RADIUS_M = 0.19       # quad250's collision sphere (sitl_vehicle.airframes)
+PASS_MARGIN_M = 0.05       # to spare on every side for an opening to count as passable (0.10 m across)
+HARD_LATERAL_M = 1.0
+HARD_WIND_MPS = (3.0, 1.0)          # mean up to, gusts up to
+HARD_CAMERA_DELAY_S = (0.03, 0.08)
+IN_VIEW_DEG = 35.0                  # a hard start sees at least one opening within this of its heading
+
+
+def draw_starts(rng: np.random.Generator, k: int, wall_x: float, altitude: float, lateral_m: float = 0.5
+                ) -> list[tuple]:
+    """k starts (x, y, 0) on the ground with a takeoff altitude each: 2–4 m from the wall, lateral offsets up to
+    ±``lateral_m`` and altitude offsets up to ±0.5 m."""
     out = []
     for _ in range(k):
         distance = float(rng.uniform(2.0, 4.0))
-        lateral = float(rng.uniform(-0.5, 0.5))
+        lateral = float(rng.uniform(-lateral_m, lateral_m))
         vertical = float(rng.uniform(-0.5, 0.5))
         out.append(((round(wall_x - distance, 3), round(lateral, 3), 0.0), round(altitude + vertical, 3)))
     return out
 
 
-def random_scene_files(count: int, seed: int, folder: Path) -> list[str]:
-    """Save ``count`` random scene specs (reproducible from ``seed``) under ``folder``; their paths."""
+def flight_rng(seed: int, scene: str, start_index: int) -> np.random.Generator:
+    """The generator of one flight's draws: a function of (seed, scene name, start index) only."""
+    return np.random.default_rng([seed, zlib.crc32(scene.encode()), start_index])
+
+
+def draw_flight(spec, seed: int, start_index: int, world: str, altitude: float = 1.5) -> dict:
+    """One flight's conditions: start, altitude, vehicle seed, and in the hard world wind and camera delay (a
+    start is redrawn, up to 20 times, until an opening lies within ``IN_VIEW_DEG`` of its heading)."""
+    rng = flight_rng(seed, spec.name, start_index)
+    hard = world == "hard"
+    for _ in range(20 if hard else 1):
+        (start, alt), = draw_starts(rng, 1, spec.wall.distance, altitude, HARD_LATERAL_M if hard else 0.5)
+        if not hard or _opening_in_view(spec, start):
+            break
+    flight = {"start": start, "altitude": alt, "seed": int(rng.integers(0, 2**31 - 1)), "wind": None,
+              "camera_delay_s": 0.0}
+    if hard:
+        flight["wind"] = (round(float(rng.uniform(0, HARD_WIND_MPS[0])), 2),
+                          round(float(rng.uniform(0, HARD_WIND_MPS[1])), 2), round(float(rng.uniform(0, 360)), 1))
+        flight["camera_delay_s"] = round(float(rng.uniform(*HARD_CAMERA_DELAY_S)), 3)
+    return flight
+
+
+def _opening_in_view(spec, start) -> bool:
+    heading = math.radians(spec.start_yaw_deg)
+    for op in spec.openings:
+        cy = float(np.mean([p[0] for p in op.polygon()]))
+        bearing = math.atan2(cy - start[1], spec.wall.distance - start[0]) - heading
+        if abs(math.degrees(bearing)) <= IN_VIEW_DEG:
+            return True
+    return False
+
+
+def judge(row: dict, passable: bool) -> dict:
+    """``row`` with ``passable`` and its success by the rule of the module docstring."""
+    crossed = bool(row.get("crossed_wall")) and not row.get("collision")
+    refused = bool(row.get("refused"))
+    return {**row, "passable": passable, "through": crossed,
+            "success": crossed if passable else (refused and not row.get("collision"))}
+
+
+def random_scene_files(count: int, seed: int, folder: Path, world: str = "standard") -> list[str]:
+    """Save ``count`` random scene specs of ``world`` (reproducible from ``seed``) under ``folder``; their paths."""
     from scenes.library import random_scene
 
     if count:
         folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for k in range(count):
-        spec = random_scene(np.random.default_rng([seed, 0xF1, k]))
+        spec = random_scene(np.random.default_rng([seed, 0xF1, k]), world=world)
         path = folder / f"{spec.name}.json"
         spec.save(path)
         paths.append(str(path))
@@ -59,10 +121,18 @@ def random_scene_files(count: int, seed: int, folder: Path) -> list[str]:
 def summarise(rows: list[dict]) -> dict:
     n = len(rows)
     ok = sum(r["success"] for r in rows)
+    passable = [r for r in rows if r.get("passable", True)]
+    impassable = [r for r in rows if not r.get("passable", True)]
     return {
         "flights": n,
         "success": ok,
         "success_rate": round(ok / n, 4) if n else None,
+        "success_interval": wilson_interval(ok, n),
+        "passable": len(passable),
+        "passable_through": sum(bool(r.get("through", r["success"])) for r in passable),
+        "impassable": len(impassable),
+        "impassable_refused": sum(bool(r.get("refused")) for r in impassable),
+        "refused": sum(bool(r.get("refused")) for r in rows),
         "collisions": sum(bool(r["collision"]) for r in rows),
         "touching_counted_as_success": sum(bool(r["success"] and r["collision"]) for r in rows),
         "median_servo_steps": float(np.median([r["servo_steps"] or 0 for r in rows])) if n else None,
@@ -71,16 +141,29 @@ def summarise(rows: list[dict]) -> dict:
     }
 
 
+def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float] | None:
+    """The 95 % Wilson score interval of a success rate (None for no trials)."""
+    if n <= 0:
+        return None
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return round(max(0.0, centre - half), 4), round(min(1.0, centre + half), 4)
+
+
 def markdown(rows: list[dict], summary: dict) -> str:
-    lines = ["| scene | flights | success | collisions | median steps |", "| --- | ---: | ---: | ---: | ---: |"]
+    lines = ["| scene | flights | passable | success | refused | collisions | median steps |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for scene in sorted({r["scene"] for r in rows}):
         sub = [r for r in rows if r["scene"] == scene]
-        lines.append(f"| {scene} | {len(sub)} | {sum(r['success'] for r in sub)} | "
+        lines.append(f"| {scene} | {len(sub)} | {'yes' if sub[0].get('passable', True) else 'no'} | "
+                     f"{sum(r['success'] for r in sub)} | {sum(bool(r.get('refused')) for r in sub)} | "
                      f"{sum(bool(r['collision']) for r in sub)} | "
                      f"{np.median([r['servo_steps'] or 0 for r in sub]):.0f} |")
-    lines.append(f"| **all** | {summary['flights']} | **{summary['success']} "
-                 f"({100 * (summary['success_rate'] or 0):.0f} %)** | {summary['collisions']} | "
-                 f"{summary['median_servo_steps']:.0f} |")
+    lo, hi = summary["success_interval"] or (0.0, 0.0)
+    lines.append(f"| **all** | {summary['flights']} | {summary['passable']} | **{summary['success']} "
+                 f"({100 * (summary['success_rate'] or 0):.0f} %, 95 % CI {100 * lo:.0f}–{100 * hi:.0f} %)** | "
+                 f"{summary['refused']} | {summary['collisions']} | {summary['median_servo_steps']:.0f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -91,6 +174,9 @@ def main(argv: list[str] | None = None) -> int:
                                              "unless --random is given)")
     p.add_argument("--random", type=int, default=0, metavar="N",
                    help="also fly N random scenes drawn from --seed (specs saved under OUT/scenes)")
+    p.add_argument("--world", choices=("standard", "hard"), default="standard",
+                   help="the random scenes' world, and the flights' conditions (see the description); standard "
+                        "draws the same scenes for a seed as ever")
     p.add_argument("--starts", type=int, default=3, help="randomised starts per scene (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start draws and the vehicles' noise")
     p.add_argument("--jobs", type=int, default=2, help="flights at once (default 2)")
@@ -118,32 +204,34 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenes = list(args.scenes) or ([] if args.random else list(SUITE))
     try:
-        scenes += random_scene_files(args.random, args.seed, args.out / "scenes")
+        scenes += random_scene_files(args.random, args.seed, args.out / "scenes", args.world)
         specs = {s: resolve_spec(s) for s in scenes}
     except Exception as exc:  # noqa: BLE001 — unknown names, bad spec files: one line
         print(f"flowgap-eval-flights: error: {exc}", file=sys.stderr)
         return 2
     labels = {s: specs[s].name for s in scenes}      # spec paths are reported by their scene's name
-    rng = np.random.default_rng(args.seed)
-    jobs = []
-    for scene in scenes:
-        for i, (start, altitude) in enumerate(draw_starts(rng, args.starts, specs[scene].wall.distance, 1.5)):
-            jobs.append((scene, i, start, altitude))
+    from scenes.groundtruth import passable_openings
+
+    passable = {s: any(passable_openings(specs[s], BODY_RADIUS_M, PASS_MARGIN_M)) for s in scenes}
+    jobs = [(scene, i, draw_flight(specs[scene], args.seed, i, args.world))
+            for scene in scenes for i in range(args.starts)]
     instances: queue.Queue[int] = queue.Queue()
     for n in range(args.jobs):
         instances.put(20 + n)  # away from instance 0, which a user's own SITL may be using
 
     def fly(job):
-        scene, i, start, altitude = job
+        scene, i, flight = job
         instance = instances.get()
         try:
-            v = launch(scene, args.out / f"{labels[scene]}-{i}", start, args.speed, instance, args.flow,
-                       args.detector, seed=args.seed + i, images=False, log_sink=None, altitude=altitude,
-                       lockstep=not args.realtime, latency_s=args.latency)
+            v = launch(scene, args.out / f"{labels[scene]}-{i}", flight["start"], args.speed, instance, args.flow,
+                       args.detector, seed=flight["seed"], images=False, log_sink=None, altitude=flight["altitude"],
+                       lockstep=not args.realtime, latency_s=args.latency, wind=flight["wind"],
+                       camera_delay_s=flight["camera_delay_s"])
         finally:
             instances.put(instance)
         v["scene"] = labels[scene]
-        return v
+        v["start_index"] = i
+        return judge(v, passable[scene])
 
     t0 = time.monotonic()
     rows = []
@@ -153,7 +241,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(future.result())
     rows.sort(key=lambda r: (r["scene"], r["run_dir"]))
     summary = summarise(rows)
-    summary.update(flow=args.flow, detector=args.detector, clock="realtime" if args.realtime else "lockstep",
+    summary.update(world=args.world, flow=args.flow, detector=args.detector,
+                   clock="realtime" if args.realtime else "lockstep",
                    speed=args.speed if args.realtime else None, latency_s=args.latency, seed=args.seed,
                    starts_per_scene=args.starts, total_wall_s=round(time.monotonic() - t0, 1))
     args.out.mkdir(parents=True, exist_ok=True)
@@ -162,7 +251,9 @@ def main(argv: list[str] | None = None) -> int:
     (args.out / "flights.md").write_text(table)
     print(table)
     print(f"success {summary['success']}/{summary['flights']}, collisions {summary['collisions']}, "
-          f"touching counted as success {summary['touching_counted_as_success']} -> {args.out}/flights.json")
+          f"touching counted as success {summary['touching_counted_as_success']}; passable scenes flown through "
+          f"{summary['passable_through']}/{summary['passable']}, impassable refused "
+          f"{summary['impassable_refused']}/{summary['impassable']} -> {args.out}/flights.json")
     return 0
 
 

@@ -20,6 +20,14 @@ from pathlib import Path
 
 from sitl_vehicle.__main__ import triple_arg
 
+
+def _wind(text: str) -> tuple[float, ...]:
+    """argparse type for --wind, checked as the vehicle checks it."""
+    from sitl_vehicle.__main__ import wind_arg
+
+    config = wind_arg(text)
+    return (config.mean_mps, config.gust_mps) + (() if config.from_deg is None else (config.from_deg,))
+
 log = logging.getLogger("flowgap-sitl")
 
 
@@ -50,25 +58,36 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0, instance: int = 0,
            flow: str = "dis:fine", detector: str = "parallax", seed: int = 0, no_noise: bool = False,
            timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float = 1.5,
-           link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0) -> dict:
+           link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0,
+           wind: tuple[float, ...] | None = None, yaw_deg: float | None = None,
+           camera_delay_s: float = 0.0) -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json).
 
     ``lockstep``: both processes on the vehicle's clock (``speed`` is then unused); ``latency_s``: the
-    companion's camera-to-setpoint latency."""
+    companion's camera-to-setpoint latency; ``wind``: (mean m/s, gust m/s[, from deg]) on the vehicle;
+    ``yaw_deg``: the start heading (default: the scene's ``start_yaw_deg``); ``camera_delay_s``: how long after
+    exposure each camera frame reaches the companion."""
+    if yaw_deg is None:
+        from scenes.build import resolve_spec
+
+        yaw_deg = resolve_spec(scene).start_yaw_deg
     run_dir.mkdir(parents=True, exist_ok=True)
     api, truth = 14540 + instance, 14560 + instance
     vehicle_result = run_dir / "vehicle_result.json"
     vehicle_cmd = [sys.executable, "-m", "sitl_vehicle", "--scene", scene, "--instance", str(instance),
-                   "--start=" + ",".join(f"{v:g}" for v in start), "--speed", f"{speed:g}", "--seed", str(seed),
+                   "--start=" + ",".join(f"{v:g}" for v in start), f"--yaw={yaw_deg:g}", "--speed", f"{speed:g}",
+                   "--seed", str(seed),
                    "--result", str(vehicle_result), "--log-level", "WARNING"]
     if no_noise:
         vehicle_cmd.append("--no-noise")
     if lockstep:
         vehicle_cmd.append("--lockstep")
+    if wind is not None:
+        vehicle_cmd.append("--wind=" + ",".join(f"{v:g}" for v in wind))
     companion_cmd = [sys.executable, "-m", "companion", "--connect", f"udpin://127.0.0.1:{api}",
                      "--truth", f"udpin://127.0.0.1:{truth}", "--scene", scene, "--flow", flow,
                      "--detector", detector, "--run-dir", str(run_dir / "companion"), "--altitude", f"{altitude:g}",
-                     "--link", link, "--latency", f"{latency_s:g}"]
+                     "--link", link, "--latency", f"{latency_s:g}", "--camera-delay", f"{camera_delay_s:g}"]
     if not images:
         companion_cmd.append("--no-images")
     if lockstep:
@@ -108,16 +127,27 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         "servo_steps": companion_summary.get("servo_steps"),
         "companion_state": companion_summary.get("state"),
         "companion_reason": companion_summary.get("reason"),
+        # declined by the companion, and the vehicle never touched anything
+        "refused": companion_summary.get("state") == "refused" and not vehicle_verdict.get("collision", False),
         "sim_time_s": vehicle_verdict.get("sim_time_s"),
         "wall_time_s": round(wall, 2),
         "start_ned": list(start),
+        "start_yaw_deg": yaw_deg,
         "altitude_m": altitude,
         "flow": flow,
         "detector": detector,
         "clock": "lockstep" if lockstep else "realtime",
         "latency_s": latency_s,
+        "wind": vehicle_verdict.get("wind"),
+        "camera_delay_s": camera_delay_s,
         "run_dir": str(run_dir),
     }
+    board = run_dir / "companion" / "storyboard.png"
+    if board.exists():
+        from companion.storyboard import append_footer
+
+        append_footer(board, [f"vehicle's verdict: {describe(verdict)}"])
+        verdict["storyboard"] = str(board)
     if not vehicle_verdict:
         verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
     (run_dir / "verdict.json").write_text(json.dumps(verdict, indent=2) + "\n")
@@ -152,7 +182,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"], help="gap detector")
     p.add_argument("--link", default="pymavlink", choices=["pymavlink", "mavsdk"], help="companion link backend")
-    p.add_argument("--seed", type=int, default=0, help="vehicle sensor-noise seed")
+    p.add_argument("--seed", type=int, default=0, help="vehicle sensor-noise (and wind) seed")
+    p.add_argument("--wind", type=_wind, default=None, metavar="MEAN,GUST[,FROM_DEG]",
+                   help="wind on the vehicle (flowgap-vehicle --wind), e.g. 3,1")
+    p.add_argument("--yaw", type=float, default=None, metavar="DEG",
+                   help="start heading in degrees (default: the scene's start_yaw_deg, 0 for the suite)")
+    p.add_argument("--camera-delay", type=float, default=0.0, metavar="S",
+                   help="camera frames reach the companion S seconds after exposure (default 0)")
     p.add_argument("--no-noise", action="store_true", help="exact-truth vehicle estimate")
     p.add_argument("--run-dir", type=Path, help="where logs go (default runs/<time>-<scene>)")
     p.add_argument("--result", type=Path, help="also write the verdict JSON here")
@@ -173,12 +209,15 @@ def main(argv: list[str] | None = None) -> int:
     run_dir = args.run_dir or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.scene}"
     verdict = launch(args.scene, run_dir, args.start, args.speed, args.instance, args.flow, args.detector,
                      args.seed, args.no_noise, args.timeout, log_sink=None if args.quiet else sys.stdout,
-                     link=args.link, lockstep=args.lockstep, latency_s=args.latency)
+                     link=args.link, lockstep=args.lockstep, latency_s=args.latency, wind=args.wind,
+                     yaw_deg=args.yaw, camera_delay_s=args.camera_delay)
     if args.result:
         args.result.parent.mkdir(parents=True, exist_ok=True)
         args.result.write_text(json.dumps(verdict, indent=2) + "\n")
     print(json.dumps(verdict, indent=2))
     print(describe(verdict))
+    if verdict.get("storyboard"):
+        print(f"storyboard: {verdict['storyboard']}")
     return 0 if verdict["success"] else 1
 
 

@@ -29,7 +29,7 @@ def test_summary_counts_and_never_counts_a_touch_as_success():
     assert (s["flights"], s["success"], s["collisions"], s["touching_counted_as_success"]) == (3, 1, 1, 0)
     assert abs(s["success_rate"] - 1 / 3) < 1e-3
     table = markdown(rows, s)
-    assert "| a | 2 | 1 | 1 |" in table and "**1 (33 %)**" in table
+    assert "| a | 2 | yes | 1 | 0 | 1 |" in table and "**1 (33 %, 95 % CI 6–79 %)**" in table
 
 
 def test_random_scene_files_are_seeded_valid_specs(tmp_path):

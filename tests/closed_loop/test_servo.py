@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from companion.servo import ServoConfig, heading_to_ned, normalised_error, push_length, push_waypoints, servo_step
@@ -93,3 +94,86 @@ def test_closed_loop_converges_from_either_side(y0, z0):
             break
     assert abs(p[1] - gap[1]) < 0.1 and abs(p[2] - gap[2]) < 0.1, f"ended at {p}"
     assert abs(p[1] - gap[1]) < abs(y0) or y0 == 0
+
+
+# --- the metric law: offsets in metres once the wall's distance is measured ---------------------------------
+
+def test_metric_offset_is_the_pixel_offset_at_the_wall_distance():
+    from companion.servo import metric_offset
+
+    # 80 px right of centre at 2 m with a 160 px focal length: 1 m right; 60 px up: 0.75 m up
+    assert metric_offset((0.5, -0.5), W, H, 160.0, 2.0) == pytest.approx((1.0, -0.75))
+
+
+def test_metric_step_removes_most_of_the_offset_and_holds_off_the_wall_until_the_sphere_clears():
+    from companion.servo import alignment_tolerance, metric_step
+
+    cfg = ServoConfig()
+    # a 0.9 m opening: clear radius 0.45 m, so the centre may be 0.45 - 0.19 - 0.05 = 0.21 m off
+    assert alignment_tolerance(0.45, cfg) == pytest.approx(0.45 - cfg.body_radius_m - cfg.clearance_margin_m)
+    far_off = metric_step((0.3, -0.1), 0.45, 1.15, 0.05, 5, cfg)
+    assert far_off.delta_heading[1:] == pytest.approx((cfg.metric_gain * 0.3, -cfg.metric_gain * 0.1))
+    assert far_off.aligned is False and not far_off.push
+    assert far_off.delta_heading[0] == pytest.approx(1.15 - cfg.hold_distance_m)   # no closer than 1.1 m
+    held = metric_step((0.3, 0.0), 0.45, 1.05, 0.05, 5, cfg)
+    assert held.delta_heading[0] == 0.0 and not held.push
+    big = metric_step((2.0, -2.0), 0.45, 2.0, 0.01, 5, cfg)
+    assert big.delta_heading[1:] == (cfg.metric_max_step_m, -cfg.metric_max_step_m)
+    centred = metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg)
+    assert centred.aligned and centred.push and centred.delta_heading[0] > 0
+    # centred but far from a small-looking wall: move on, do not push yet
+    approach = metric_step((0.05, 0.02), 0.45, 2.5, 0.05, 5, cfg)
+    assert approach.aligned and not approach.push and approach.delta_heading[0] == pytest.approx(
+        cfg.forward_step_m * (1 - math.hypot(0.05, 0.02) / cfg.metric_slowdown_m))
+
+
+def test_the_metric_law_never_pushes_a_sphere_that_would_not_clear():
+    from companion.servo import metric_step
+
+    cfg = ServoConfig()
+    spent = metric_step((0.3, 0.0), 0.45, 1.1, 0.3, cfg.step_budget - 1, cfg)
+    assert not spent.push and spent.aligned is False      # the budget is spent, but pushing would touch
+    assert metric_step((0.02, 0.0), 0.45, 1.5, 0.05, cfg.step_budget - 1, cfg).push
+    narrow = metric_step((0.0, 0.0), 0.2, 1.2, 0.3, 5, cfg)  # 0.4 m across: no offset is good enough
+    assert narrow.tolerance_m < 0 and not narrow.push and narrow.aligned is False
+
+
+def test_metric_servo_converges_on_a_far_off_axis_opening_before_the_wall():
+    """The failure it fixes: an opening 0.9 m to the side, reached at 45° by the paper's law (κ·e is too small
+    a step close to the wall); the metric law centres first, then pushes."""
+    from companion.servo import metric_step
+
+    cfg = ServoConfig()
+    gap = (3.0, 0.9, -1.5)
+    p = [1.5, 0.0, -1.5]
+    for k in range(30):
+        distance = gap[0] - p[0]
+        step = metric_step((gap[1] - p[1], gap[2] - p[2]), 0.45, distance, 0.05, k, cfg)
+        if step.push:
+            break
+        p = [p[0] + step.delta_heading[0], p[1] + step.delta_heading[1], p[2] + step.delta_heading[2]]
+        assert gap[0] - p[0] >= cfg.hold_distance_m - 1e-9 or step.aligned
+    assert step.push and abs(p[1] - gap[1]) <= step.tolerance_m
+
+
+def test_the_push_stops_short_of_the_far_surface_seen_through_the_opening():
+    cfg = ServoConfig()
+    usual = push_length(1.0, cfg)
+    assert push_length(1.0, cfg, far_distance_m=10.0) == pytest.approx(usual)
+    near = push_length(1.0, cfg, far_distance_m=1.8)       # background 0.65 m behind a 0.15 m wall
+    assert near == pytest.approx(1.8 - cfg.body_radius_m - cfg.far_margin_m) and near < usual
+    # never shorter than the crossing needs: the centre past the front face by the body's radius
+    assert push_length(1.0, cfg, far_distance_m=1.1) == pytest.approx(1.0 + cfg.body_radius_m)
+
+
+def test_far_distance_is_read_from_the_parallax_inside_the_gap():
+    from companion.servo import far_distance_from_flow, wall_distance_from_flow
+    from tests.companion.synthetic import translation_flow
+
+    square = [(120, 80), (200, 80), (200, 160), (120, 160)]
+    # camera moving 0.2 m forward; the wall 2 m ahead (ρ = 0.1 per step), the far surface 5 m (ρ = 0.04)
+    flow, mask = translation_flow(240, 320, (0.0, 0.0, 1.0), square, rho_near=0.1, rho_far=0.04, scale=1.0)
+    assert far_distance_from_flow(flow, mask, 0.2) == pytest.approx(5.0, rel=0.02)
+    assert wall_distance_from_flow(flow, mask, 0.2) == pytest.approx(2.0, rel=0.02)
+    assert far_distance_from_flow(flow, mask, 0.0) is None
+    assert far_distance_from_flow(flow, np.zeros_like(mask), 0.2) is None

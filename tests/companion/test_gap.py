@@ -125,3 +125,33 @@ def test_inverse_depth_is_step_over_depth():
                                rtol=1e-3)
     np.testing.assert_allclose(np.nanmedian(rho[valid & truth]), 0.015 * np.linalg.norm((0.3, -0.1, 1.0)),
                                rtol=1e-3)
+
+
+def test_the_clear_circle_is_the_largest_circle_inside_the_mask_not_the_centroid():
+    from companion.gap import clear_circle
+
+    mask = np.zeros((240, 320), bool)
+    mask[60:180, 100:160] = True           # a 60 × 120 px slot
+    centre, radius = clear_circle(mask)
+    assert radius == pytest.approx(30.0, abs=0.5) and centre == pytest.approx((129.5, 119.5), abs=1.0)
+    # an L: the centroid lies near the corner; the clear centre sits in the wider arm
+    mask[:] = False
+    mask[40:200, 40:80] = True
+    mask[160:200, 40:280] = True
+    (cu, cv), r = clear_circle(mask)
+    assert 20.0 <= r <= 30.0 and mask[int(cv), int(cu)]                    # inside, where the arms meet
+    ys, xs = np.nonzero(mask)
+    assert not mask[int(round(ys.mean())), int(round(xs.mean()))]         # the centroid is not even inside
+    # the frame's border is an edge: a mask running off the frame is clipped there
+    mask[:] = False
+    mask[100:200, 0:50] = True
+    assert clear_circle(mask)[1] == pytest.approx(25.0, abs=0.6)
+    assert clear_circle(np.zeros((10, 10), bool)) == (None, 0.0)
+
+
+def test_a_detection_carries_its_clear_circle():
+    square = [(100, 60), (220, 60), (220, 150), (100, 150)]
+    flow, _ = translation_flow(240, 320, (0.0, 0.0, 1.0), square)
+    det = detect_gap_parallax(flow)
+    assert det.found and det.clear_radius_px == pytest.approx(45.0, abs=4.0)
+    assert det.clear_centre == pytest.approx((160.0, 105.0), abs=4.0)

@@ -35,8 +35,8 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     """Replay ``run_dir``; ``flow``/``detector`` default to what the flight used."""
     from companion.flow.registry import make_flow_backend, parse_backend
     from companion.gap import get_detector
+    from companion.opening import OpeningTracker, candidates_in
     from companion.perception import perceive
-    from companion.tracking import ConfirmingCentroidFilter
     from scenes import PinholeCamera, Pose, load_scene, render_splats
 
     summary_path = run_dir / "summary.json"
@@ -54,7 +54,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     detect = get_detector(detector_name)
     _, cloud = load_scene(summary["scene"])
     camera = PinholeCamera()
-    tracker = ConfirmingCentroidFilter()
+    openings = OpeningTracker()   # the image phase of the mission's tracking: its centroid_used
 
     def render(step):
         f = frames[step]
@@ -65,7 +65,8 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
         rgb = render(step)
         p = perceive(prev, rgb, frames[step - 1]["attitude_est"], frames[step]["attitude_est"], camera.K,
                      backend, detect)
-        used = tracker.update(p.level_centroid)
+        used = openings.observe(candidates_in(p.detection, camera.K, frames[step]["attitude_est"]), (0.0, 0.0),
+                                None, float(camera.K[0, 0]), camera.width, camera.height).target_px
         flown = decisions.get(step, {}).get("centroid_used")
         if used is None or flown is None:
             distance = None if used is None and flown is None else math.inf
