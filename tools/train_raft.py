@@ -61,7 +61,7 @@ from tools.raft_data import (
 PROG = "flowgap-train-raft"
 TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height", "crop",
               "crop_focus", "zoom", "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters",
-              "upsample", "distance", "precision")
+              "upsample", "distance", "precision", "head_lr_mult")
 UPSAMPLE_MODES = {"centres": False, "corners": True}   # --upsample -> RaftConfig.upsample_align_corners
 
 
@@ -153,8 +153,8 @@ def build_model(variant: str, upsample: str = "centres"):
 
 
 # variant being trained -> variants whose weights it can start from, missing only its own new head
-GROWS_FROM = {"small-convex": ("small",)}
-NEW_HEAD_PREFIX = "update_block.mask."
+GROWS_FROM = {"small-convex": ("small",), "small-refined": ("small-convex", "small")}
+NEW_HEAD_PREFIXES = ("update_block.mask.", "refiner.")
 
 
 def load_weights_into(model: torch.nn.Module, path: str | Path, variant: str) -> str:
@@ -179,11 +179,12 @@ def load_weights_into(model: torch.nn.Module, path: str | Path, variant: str) ->
         raise CliError(f"{path} does not fit RAFT-{variant}: {str(exc).splitlines()[0][:200]}") from None
     if grows:
         unexpected = list(result.unexpected_keys)
-        foreign = [k for k in result.missing_keys if not k.startswith(NEW_HEAD_PREFIX)]
+        foreign = [k for k in result.missing_keys if not k.startswith(NEW_HEAD_PREFIXES)]
         if unexpected or foreign:
             raise CliError(f"{path} does not fit RAFT-{variant}: {(unexpected + foreign)[0]}")
-        print(f"{PROG}: note: RAFT-{variant} starts from {path}'s RAFT-{loaded.variant} weights; its mask head "
-              f"starts as bilinear upsampling", file=sys.stderr)
+        print(f"{PROG}: note: RAFT-{variant} starts from {path}'s RAFT-{loaded.variant} weights; its new heads "
+              f"({', '.join(sorted({k.split('.')[0] + '.' + k.split('.')[1] for k in result.missing_keys}))}) "
+              f"start as bilinear upsampling and no correction", file=sys.stderr)
     return loaded.layout
 
 
@@ -305,6 +306,8 @@ def train(args: argparse.Namespace) -> dict:
             config["distance"] = None      # nor stand further than 2.6 m from the wall
         if "precision" not in stored:
             config["precision"] = "fp32"   # nor train under bf16 autocast
+        if "head_lr_mult" not in stored:
+            config["head_lr_mult"] = 1.0   # nor give new heads a larger learning rate
 
     out = Path(args.out)
     if args.init and not resume:
@@ -328,8 +331,19 @@ def train(args: argparse.Namespace) -> dict:
     elif args.init:
         load_weights_into(model, args.init, config["variant"])
     model.train()
-    optimizer = torch.optim.AdamW(model.parameters(), lr=config["lr"], weight_decay=config["wdecay"], eps=1e-8)
-    scheduler = torch.optim.lr_scheduler.OneCycleLR(optimizer, max_lr=config["lr"], total_steps=config["steps"] + 100,
+    # The heads a variant adds (convex upsampling, quarter refinement) may learn faster than the weights they
+    # grow from: Adam moves every parameter by about the learning rate per step, and RAFT's mask logits are
+    # scaled by 0.25.
+    heads = [p for name, p in model.named_parameters() if name.startswith(NEW_HEAD_PREFIXES)]
+    rest = [p for name, p in model.named_parameters() if not name.startswith(NEW_HEAD_PREFIXES)]
+    if not heads or (resume is not None and len(resume["train"]["optimizer"]["param_groups"]) == 1):
+        rest, heads = rest + heads, []       # (checkpoints from before the head group have one group)
+    groups = [{"params": rest, "lr": config["lr"]}]
+    if heads:
+        groups.append({"params": heads, "lr": config["lr"] * config["head_lr_mult"]})
+    lrs = [g["lr"] for g in groups]
+    optimizer = torch.optim.AdamW(groups, weight_decay=config["wdecay"], eps=1e-8)
+    scheduler = torch.optim.lr_scheduler.OneCycleLR(optimizer, max_lr=lrs, total_steps=config["steps"] + 100,
                                                     pct_start=0.05, cycle_momentum=False, anneal_strategy="linear")
     step = 0
     if resume is not None:
@@ -482,6 +496,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="RAFT-small's bilinear x8 upsampling: each 1/8-resolution value at its 8x8 block's "
                         "centre, or stretched to the frame's corners as the RAFT authors (and flowgap's "
                         "stage 1-3 weights); the run's choice wins over --init weights'")
+    t.add_argument("--head-lr-mult", dest="head_lr_mult", type=float, default=1.0, metavar="M",
+                   help="learning rate of the heads a variant adds to the weights it grows from (convex "
+                        "upsampling, quarter refinement), as a multiple of --lr")
     t.add_argument("--precision", choices=("fp32", "bf16"), default="fp32",
                    help="bf16: the forward pass under bf16 autocast (weights, optimiser, correlation, upsampling "
                         "and loss stay float32); about 1.6x faster on CPUs with AVX512-BF16 or AMX")
@@ -614,6 +631,8 @@ def _check(args: argparse.Namespace) -> None:
         raise CliError(f"--jitter must be in [0, 1) (got {args.jitter})")
     if not (args.lr > 0 and math.isfinite(args.lr)):
         raise CliError(f"--lr must be positive (got {args.lr})")
+    if not (args.head_lr_mult > 0 and math.isfinite(args.head_lr_mult)):
+        raise CliError(f"--head-lr-mult must be positive (got {args.head_lr_mult})")
     if not 0.0 < args.gamma <= 1.0:
         raise CliError(f"--gamma must be in (0, 1] (got {args.gamma})")
     if args.clip <= 0:

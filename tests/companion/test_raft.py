@@ -609,3 +609,43 @@ def test_bf16_and_fp32_agree_on_a_textured_pair():
     diff = np.abs(flows["bf16"] - flows["fp32"])
     scale = np.abs(flows["fp32"]).mean()
     assert diff.mean() < 0.05 * scale + 0.01 and not np.array_equal(flows["bf16"], flows["fp32"])
+
+
+# --- RAFT-small-refined: a quarter-resolution correction after the iterations ------------------------------
+
+def test_small_refined_starts_as_the_convex_model_it_grows_from_and_is_recognised(tmp_path):
+    convex = RAFT(RaftConfig.small_convex()).eval()
+    refined = RAFT(RaftConfig.small_refined()).eval()
+    missing = refined.load_state_dict(convex.state_dict(), strict=False).missing_keys
+    assert missing and all(k.startswith("refiner.") for k in missing)
+    img1, img2 = (torch.from_numpy(a).permute(2, 0, 1)[None].float() for a in textured_pair(96, 128, (3.0, -1.5)))
+    with torch.inference_mode():
+        a = convex(img1, img2, iters=2)
+        b = refined(img1, img2, iters=2, all_predictions=True)
+    assert b.flow_up.shape == a.flow_up.shape and len(b.predictions) == 3      # 2 iterations + the refinement
+    # no correction yet: the convex flow, pooled to the 1/4 grid and upsampled bilinearly again (the head's
+    # start, which leaks 1 % weight onto each other window cell)
+    import torch.nn.functional as F
+
+    pooled = F.avg_pool2d(a.flow_up, 4)
+    expected = F.interpolate(pooled, scale_factor=4, mode="bilinear", align_corners=False)
+    inner = (..., slice(4, -4), slice(4, -4))
+    assert (b.flow_up - expected)[inner].abs().mean() < 0.03 * pooled.abs().mean() + 1e-3
+    save_flowgap_weights(refined, tmp_path / "r.pth", "small-refined")
+    clear_cache()
+    assert load_raft_state_dict(tmp_path / "r.pth").variant == "small-refined"
+
+
+def test_local_correlation_is_the_dot_product_over_the_window():
+    from companion.flow.raft.refine import local_correlation, warp
+
+    torch.manual_seed(1)
+    f1, f2 = torch.randn(1, 4, 6, 7), torch.randn(1, 4, 6, 7)
+    out = local_correlation(f1, f2, radius=1)
+    y, x = 3, 2
+    for i, (dy, dx) in enumerate((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)):
+        expected = (f1[0, :, y, x] * f2[0, :, y + dy, x + dx]).sum() / 2.0
+        assert out[0, i, y, x].item() == pytest.approx(expected.item(), abs=1e-5)
+    shift = torch.zeros(1, 2, 6, 7)
+    shift[:, 0] = 1.0                                          # one pixel right
+    assert torch.allclose(warp(f2, shift)[..., :-1], f2[..., 1:], atol=1e-5)

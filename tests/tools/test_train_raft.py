@@ -380,7 +380,7 @@ def test_a_convex_run_starts_from_small_weights_and_trains_under_bf16(trained_ru
                           "--out", str(tmp_path)])
     assert rc == 0
     err = capsys.readouterr().err
-    assert "starts from" in err and "mask head starts as bilinear upsampling" in err
+    assert "starts from" in err and "new heads (update_block.mask) start as bilinear upsampling" in err
     ckpt = torch.load(tmp_path / "checkpoint-000002.pth", weights_only=True)
     assert ckpt["variant"] == "small-convex" and ckpt["train"]["config"]["precision"] == "bf16"
     start = torch.load(trained_run / "raft-small-flowgap.pth", weights_only=True)["state_dict"]
@@ -388,6 +388,14 @@ def test_a_convex_run_starts_from_small_weights_and_trains_under_bf16(trained_ru
     assert moved and all(k in ckpt["state_dict"] for k in start)           # trained from them, not replaced
     # weights trained under bf16 are meant to run in it (where the CPU has it): the file says so
     assert ckpt["inference"]["precision"] == "auto" and ckpt["inference"]["iters"] == 2
+    # ... and a refined one from those convex weights (its quarter refiner new), with faster heads
+    rc = train_raft.main([*TINY, "--variant", "small-refined", "--init", str(tmp_path / "checkpoint-000002.pth"),
+                          "--steps", "1", "--val-size", "0", "--head-lr-mult", "5", "--out", str(tmp_path / "ref")])
+    assert rc == 0 and "new heads (refiner.conv1, refiner.conv2, refiner.flow, refiner.mask)" in capsys.readouterr().err
+    refined = torch.load(tmp_path / "ref" / "checkpoint-000001.pth", weights_only=True)
+    assert refined["variant"] == "small-refined" and refined["train"]["config"]["head_lr_mult"] == 5.0
+    groups = refined["train"]["optimizer"]["param_groups"]
+    assert len(groups) == 2 and groups[1]["lr"] == pytest.approx(5 * groups[0]["lr"])
     rc = train_raft.main([*TINY, "--variant", "large", "--init", str(trained_run / "raft-small-flowgap.pth"),
                           "--steps", "1", "--val-size", "0", "--out", str(tmp_path / "large")])
     assert rc == 2 and "use --variant small" in capsys.readouterr().err

@@ -95,13 +95,15 @@ class Encoder(nn.Module):
                 nn.init.ones_(m.weight)
                 nn.init.zeros_(m.bias)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, with_quarter: bool = False):
+        """The 1/8-resolution map; with ``with_quarter`` also the 1/4-resolution one (``layer2``'s output):
+        ``(eighth, quarter)``."""
         x = self.relu1(self.norm1(self.conv1(x)))
-        x = self.layer3(self.layer2(self.layer1(x)))
-        x = self.conv2(x)
+        quarter = self.layer2(self.layer1(x))
+        x = self.conv2(self.layer3(quarter))
         if self.dropout is not None and self.training:
             x = self.dropout(x)
-        return x
+        return (x, quarter) if with_quarter else x
 
 
 def basic_encoder(output_dim: int, norm: str, dropout: float = 0.0) -> Encoder:

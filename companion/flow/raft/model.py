@@ -6,14 +6,16 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from companion.flow.raft.corr import CorrBlock
 from companion.flow.raft.extractor import basic_encoder, small_encoder
+from companion.flow.raft.refine import QuarterRefiner
 from companion.flow.raft.update import UpdateBlock
 from companion.flow.raft.upsample import bilinear_mask_logits, convex_upsample, upflow8
 
-VARIANTS = ("small", "small-convex", "large")
+VARIANTS = ("small", "small-convex", "small-refined", "large")
 
 
 @dataclass(frozen=True)
@@ -36,6 +38,9 @@ class RaftConfig:
     # towards zero flow.
     mask_dim: int = 0
     upsample_pad: str = "zeros"
+    # a last correction on the 1/4 grid with the encoders' quarter-resolution features, then ×4 convex
+    # upsampling (companion.flow.raft.refine)
+    quarter_refine: bool = False
 
     @classmethod
     def small(cls, **kw) -> RaftConfig:
@@ -49,6 +54,13 @@ class RaftConfig:
         return cls("small-convex", 96, 64, 4, 3, mask_dim=128, upsample_pad="replicate", **kw)
 
     @classmethod
+    def small_refined(cls, **kw) -> RaftConfig:
+        """RAFT-small-convex with a quarter-resolution refinement (:mod:`~companion.flow.raft.refine`): the
+        companion's flow, one pass at the camera's resolution."""
+        kw.setdefault("upsample_align_corners", False)
+        return cls("small-refined", 96, 64, 4, 3, mask_dim=128, upsample_pad="replicate", quarter_refine=True, **kw)
+
+    @classmethod
     def large(cls, **kw) -> RaftConfig:
         return cls("large", 128, 128, 4, 4, mask_dim=256, **kw)
 
@@ -56,7 +68,8 @@ class RaftConfig:
     def for_variant(cls, variant: str, **kw) -> RaftConfig:
         if variant not in VARIANTS:
             raise ValueError(f"unknown RAFT variant {variant!r}; choose one of {', '.join(VARIANTS)}")
-        return {"small": cls.small, "small-convex": cls.small_convex, "large": cls.large}[variant](**kw)
+        return {"small": cls.small, "small-convex": cls.small_convex, "small-refined": cls.small_refined,
+                "large": cls.large}[variant](**kw)
 
 
 class RaftOutput(NamedTuple):
@@ -94,7 +107,8 @@ class RAFT(nn.Module):
         corr_channels = config.corr_levels * (2 * config.corr_radius + 1) ** 2
         self.update_block = UpdateBlock(corr_channels=corr_channels, hidden_dim=hdim, context_dim=cdim,
                                         small=small, mask_dim=config.mask_dim)
-        if config.variant == "small-convex":
+        self.refiner = QuarterRefiner(feature_dim=64, context_dim=64) if config.quarter_refine else None
+        if config.variant in ("small-convex", "small-refined"):
             # Start the new mask head as bilinear interpolation from the block centres, so that RAFT-small
             # weights loaded into it flow exactly as they did; training then sharpens it at edges.
             last = self.update_block.mask[-1]
@@ -113,11 +127,16 @@ class RAFT(nn.Module):
         image1 = 2.0 * (image1 / 255.0) - 1.0
         image2 = 2.0 * (image2 / 255.0) - 1.0
 
-        # 1. features of both frames (one batch), context of the first
-        fmap1, fmap2 = self.fnet(torch.cat([image1, image2], dim=0)).float().chunk(2, dim=0)
+        # 1. features of both frames (one batch), context of the first (and their quarter-resolution maps)
+        quarter = self.refiner is not None
+        fout = self.fnet(torch.cat([image1, image2], dim=0), with_quarter=quarter)
+        cout = self.cnet(image1, with_quarter=quarter)
+        if quarter:
+            (fout, fquarter), (cout, cquarter) = fout, cout
+        fmap1, fmap2 = fout.float().chunk(2, dim=0)
         with torch.autocast(image1.device.type, enabled=False):   # the correlation volume stays float32
             corr_fn = CorrBlock(fmap1, fmap2, num_levels=cfg.corr_levels, radius=cfg.corr_radius)
-        net, inp = torch.split(self.cnet(image1), [cfg.hidden_dim, cfg.context_dim], dim=1)
+        net, inp = torch.split(cout, [cfg.hidden_dim, cfg.context_dim], dim=1)
         net, inp = torch.tanh(net), torch.relu(inp)
 
         # 2. flow as coordinate update: coords1 − coords0, starting from zero or the warm start
@@ -140,7 +159,18 @@ class RAFT(nn.Module):
 
         flow_low = coords1 - coords0
         flow_up = predictions[-1] if predictions else self._upsample(flow_low, net)
+        if quarter:
+            q1, q2 = fquarter.chunk(2, dim=0)
+            flow_up = self._refine(flow_up, q1, q2, cquarter)
+            predictions.append(flow_up)
         return RaftOutput(flow_low, flow_up, predictions if all_predictions else [])
+
+    def _refine(self, flow_up: torch.Tensor, f1: torch.Tensor, f2: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
+        """The quarter-resolution correction of a full-resolution flow (see :mod:`.refine`)."""
+        flow_quarter = F.avg_pool2d(flow_up.detach(), 4) / 4.0          # full-res px -> quarter-grid px
+        flow_quarter, mask = self.refiner(flow_quarter, f1, f2, context)
+        with torch.autocast(flow_up.device.type, enabled=False):
+            return convex_upsample(flow_quarter.float(), mask.float(), pad="replicate", factor=4)
 
     def _upsample(self, flow: torch.Tensor, net: torch.Tensor) -> torch.Tensor:
         mask = self.update_block.mask_logits(net)

@@ -91,6 +91,8 @@ def detect_layout(obj: object) -> str:
 def detect_variant(state_dict: Mapping[str, torch.Tensor]) -> str | None:
     """'small' / 'small-convex' / 'large' from our-layout keys, None when neither GRU is present."""
     if "update_block.gru.convz.weight" in state_dict:
+        if "refiner.conv1.weight" in state_dict:
+            return "small-refined"
         return "small-convex" if "update_block.mask.0.weight" in state_dict else "small"
     if "update_block.gru.convz1.weight" in state_dict:
         return "large"
