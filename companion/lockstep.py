@@ -41,8 +41,10 @@ def lockstep_message(time_s: float, count: int, sequence: int) -> mavlink.MAVLin
 
 
 def is_lockstep(msg) -> bool:
+    if msg.get_type() != "DEBUG_VECT":
+        return False
     name = msg.name if isinstance(msg.name, str) else msg.name.decode(errors="replace")
-    return msg.get_type() == "DEBUG_VECT" and name.rstrip("\x00") == LOCKSTEP_NAME
+    return name.rstrip("\x00") == LOCKSTEP_NAME
 
 
 class LockstepChannel:

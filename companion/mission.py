@@ -1,6 +1,6 @@
 """The companion's mission: CONNECT → PREFLIGHT → ARM → TAKEOFF → OFFBOARD → SERVO → TRAVERSE → HOLD|LAND → DONE.
 
-Each servo step (DESIGN.md steps 1–6): move to the waypoint and wait for arrival, take a frame, compute
+Each servo step (docs/design.md steps 1–8): move to the waypoint and wait for arrival, take a frame, compute
 flow against the previous frame, detect the gap, filter the centroid (τ_c), and derive the next waypoint.
 When centred and close, or when the step budget is spent, push through in 0.05 m increments (step 7).
 Every way out of the loop is a state: a lost link, a refused command, or no gap after N frames ends in
@@ -35,6 +35,7 @@ from companion.servo import (
     push_waypoints,
     servo_step,
     wall_distance_from_flow,
+    wall_yaw_from_flow,
 )
 from companion.storyboard import Storyboard, StoryRow, step_text
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
@@ -177,6 +178,7 @@ class Mission:
         wall_estimates: list[float] = []  # forward coordinate of the wall, one per measurement
         rough_estimates: list[float] = []  # ... and from frames without a gap too (a safety bound only)
         far_estimates: list[float] = []   # ... and of the far surface seen through the opening
+        yaw_estimates: list[float] = []   # how far the wall is turned against the heading (rad)
         openings = OpeningTracker(cfg, self.openings, self.tracker)
         focal = float(self.camera.K[0, 0])
         ever_seen = False
@@ -221,7 +223,13 @@ class Mission:
             enough = len(wall_estimates) >= self.config.min_wall_measurements
             wall_distance = float(np.median(wall_estimates)) - here if enough else None
             axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), self.camera.K, attitude[0], attitude[1])
-            sight = openings.observe(candidates, self._across(position), wall_distance, focal, width, height, axis)
+            if found and moved >= 0.08:
+                turned = wall_yaw_from_flow(flow, np.logical_or.reduce([d.mask for d in found]), focal)
+                if turned is not None:
+                    yaw_estimates.append(turned)
+            wall_yaw = float(np.median(yaw_estimates[-5:])) if len(yaw_estimates) >= 3 else None
+            sight = openings.observe(candidates, self._across(position), wall_distance, focal, width, height, axis,
+                                     moved, wall_yaw)
             if sight.note:
                 log.info("%s", sight.note)
             if sight.refusal:
@@ -249,7 +257,8 @@ class Mission:
                     next_step = dataclasses.replace(next_step, delta_heading=(forward, 0.0, 0.0), push=False)
             else:
                 next_step = metric_step(sight.offset_m, sight.clear_radius_m, wall_distance, area_frac, k + 1, cfg,
-                                        normalised_error(used, width, height), sight.clearance_here_m)
+                                        normalised_error(used, width, height), sight.clearance_here_m,
+                                        sight.sightings)
             self.clock.sleep_until(t_frame + self.config.perception_latency_s)
             self.result.servo_steps = k + 1
             flow_bgr = flow_to_colour(flow, bgr=True)
@@ -284,9 +293,10 @@ class Mission:
             if next_step.push:
                 break
         else:
-            if step.aligned is False:     # the metric law would not push a sphere that would not clear
+            if step.offset_m is not None:    # the metric law pushes only a sphere it has seen clear the edges
                 raise Refusal(f"could not centre on the opening within {cfg.step_budget} steps (still "
-                              f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed): "
+                              f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed"
+                              f"{'' if step.aligned is False else ', not seen clear in the last frame'}): "
                               "not flying through")
         self.result.wall_distance_m = wall_distance
         here = self._forward(prev_position)

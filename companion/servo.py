@@ -1,6 +1,6 @@
-"""Image-based visual servoing toward the gap (DESIGN.md steps 5–7), as pure functions.
+"""Image-based visual servoing toward the gap (docs/design.md steps 5–8), as pure functions.
 
-Sign convention (DESIGN.md step 5, correcting the paper): with a forward camera in FRD, a gap seen to
+Sign convention (docs/design.md step 5, correcting the paper): with a forward camera in FRD, a gap seen to
 the right of the image centre (e_u > 0) is to the vehicle's right (+y in NED when heading north), so the
 lateral step is Δy = +κ_y·e_u; likewise a gap below the centre (e_v > 0) is lower, Δz = +κ_z·e_v (NED z
 is down). Steps are taken in the heading frame and rotated into NED by the current yaw.
@@ -54,7 +54,14 @@ class ServoConfig:
                                     # fraction above)
     hold_distance_m: float = 1.1  # misaligned, the vehicle moves no closer than this to the wall; it centres
                                   # first, then pushes (the paper pushes whatever the centring)
-    far_margin_m: float = 0.15  # the push stops this short of the far surface seen through the opening (ours)
+    far_margin_m: float = 0.35  # the push stops this short of the far surface seen through the opening (ours;
+                                # measured: the vehicle runs on 0.1-0.2 m past the push's last setpoint)
+    probe_step_m: float = 0.08  # aligned on the tracked place but not seen this frame: creep this far on ...
+    probe_floor_m: float = 0.9  # ... while the wall is further than this; held still, step this far back
+    roomy_tolerance_m: float = 0.1  # an opening this much wider than needed may be pushed through unseen in
+                                    # the last frame (the push's own correction is 0.06 m at most) ...
+    roomy_sightings: int = 3        # ... once this many frames placed it (measured: two sightings at the frame's
+                                    # edge placed one 0.3 m off, and the push met its edge)
 
 
 @dataclass(frozen=True)
@@ -84,7 +91,7 @@ def alignment_tolerance(clear_radius_m: float, config: ServoConfig) -> float:
 
 
 def normalised_error(centroid: tuple[float, float], width: int, height: int) -> tuple[float, float]:
-    """DESIGN.md step 5: e_u = (u − W/2)/(W/2), e_v = (v − H/2)/(H/2)."""
+    """docs/design.md step 5: e_u = (u − W/2)/(W/2), e_v = (v − H/2)/(H/2)."""
     u, v = centroid
     return (u - width / 2) / (width / 2), (v - height / 2) / (height / 2)
 
@@ -117,7 +124,8 @@ def servo_step(centroid: tuple[float, float] | None, area_frac: float, step_inde
 
 def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m: float, area_frac: float,
                 step_index: int, config: ServoConfig = ServoConfig(),
-                error: tuple[float, float] | None = None, clearance_here_m: float | None = None) -> ServoStep:
+                error: tuple[float, float] | None = None, clearance_here_m: float | None = None,
+                sightings: int = 0) -> ServoStep:
     """One step of the metric law, from the body's (right, down) offset to the opening's clear centre in
     metres and the opening's clear radius: remove ``metric_gain`` of the offset (clamped), move forward less
     the further off it is, never closer than ``hold_distance_m`` while the sphere would not clear the edges,
@@ -128,21 +136,30 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
     the image error, for the record."""
     budget_spent = step_index + 1 >= config.step_budget
     tolerance = alignment_tolerance(clear_radius_m, config)
+    fresh = clearance_here_m is not None
     limit = config.metric_max_step_m
     dy = float(np.clip(config.metric_gain * offset_m[0], -limit, limit))
     dz = float(np.clip(config.metric_gain * offset_m[1], -limit, limit))
     off = math.hypot(*offset_m)
-    if clearance_here_m is not None:
+    if fresh:
         aligned = 0.0 <= tolerance and alignment_tolerance(clearance_here_m, config) >= 0.0
     else:
         aligned = 0.0 <= tolerance and off <= tolerance
     forward = config.forward_step_m * float(np.clip(1.0 - off / config.metric_slowdown_m,
                                                     config.min_forward_frac, 1.0))
-    if not aligned:
-        forward = min(forward, max(0.0, distance_m - config.hold_distance_m))
     close = area_frac >= config.close_area_frac or distance_m <= config.close_distance_m
     large = area_frac >= config.push_area_frac or distance_m <= config.push_distance_m
-    push = aligned and (large or budget_spent)
+    # A sphere with room to spare may push on the tracked place alone, once several sightings placed it; one
+    # that only just fits must have been seen clear in this very frame.
+    roomy = aligned and tolerance >= config.roomy_tolerance_m and sightings >= config.roomy_sightings
+    if not aligned:
+        forward = min(forward, max(0.0, distance_m - config.hold_distance_m))
+    elif not (fresh or roomy) and large:
+        forward = min(forward, config.probe_step_m) if distance_m > config.probe_floor_m else 0.0
+    if forward < 0.02 and abs(dy) < 0.02 and abs(dz) < 0.02:
+        # held in place a frame pair has no parallax to see the opening by: step back, the next step returns
+        forward = -config.probe_step_m
+    push = aligned and (fresh or roomy) and (large or budget_spent)
     return ServoStep((forward, dy, dz), error, close, push, (float(offset_m[0]), float(offset_m[1])), tolerance,
                      aligned)
 
@@ -171,7 +188,7 @@ def push_length(wall_distance_m: float | None, config: ServoConfig = ServoConfig
 
 def push_waypoints(start: tuple[float, float, float], yaw: float, length_m: float,
                    bias: tuple[float, float], config: ServoConfig = ServoConfig()) -> list[tuple[float, float, float]]:
-    """DESIGN.md step 7: N_f forward increments of 0.05 m, spreading the last small lateral/vertical bias
+    """docs/design.md step 8: N_f forward increments of 0.05 m, spreading the last small lateral/vertical bias
     correction over the first half of the push, level flight (position setpoints only)."""
     n = max(1, int(math.ceil(length_m / config.push_increment_m)))
     limit = config.lateral_clamp_far_m  # "small" bias corrections: never more than an early servo step
@@ -229,3 +246,31 @@ def wall_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, trans
     # it and away from far pixels the gap mask missed.
     rho_wall = float(np.percentile(rho[keep], 60))
     return translation_m / rho_wall if rho_wall > 0 else None
+
+
+def wall_yaw_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, focal_px: float) -> float | None:
+    """How far the wall is turned against the camera's axis (radians, positive: its right side further away),
+    from the same inverse depth: on a plane, ρ is linear in the normalised image coordinates, ρ ∝ n·(x/f, y/f,
+    1), so a least-squares plane through the wall's ρ (outside the gaps, away from the frame's edges and from
+    far pixels a mask missed) gives its normal's direction.  None when too little wall is measurable."""
+    from companion.gap import inverse_depth_from_flow
+
+    rho, valid = inverse_depth_from_flow(flow)
+    keep = valid & np.isfinite(rho) & (rho > 0)
+    if gap_mask is not None:
+        keep &= ~gap_mask.astype(bool)
+    h, w = keep.shape
+    core = np.zeros_like(keep)
+    core[h // 8: h - h // 4, w // 10: w - w // 10] = True      # not the floor at the bottom, nor the edges
+    keep &= core
+    if keep.sum() < 0.05 * h * w:
+        return None
+    values = rho[keep]
+    lo, hi = np.percentile(values, (20, 95))                    # the wall, not what lies beyond it
+    keep &= (rho >= lo) & (rho <= hi)
+    ys, xs = np.nonzero(keep)
+    a = np.stack([(xs - (w - 1) / 2) / focal_px, (ys - (h - 1) / 2) / focal_px, np.ones(len(xs))], axis=1)
+    coef, *_ = np.linalg.lstsq(a, rho[keep], rcond=None)
+    if coef[2] <= 0:
+        return None
+    return float(math.atan2(-coef[0], coef[2]))

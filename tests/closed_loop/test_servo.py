@@ -20,7 +20,7 @@ def test_normalised_error_is_zero_at_the_centre_and_one_at_the_edges():
 
 @pytest.mark.parametrize("u, sign", [(240, +1), (80, -1)])
 def test_gap_right_of_centre_moves_right(u, sign):
-    # DESIGN.md step 5: Δy = +κ_y·e_u (the paper's printed minus sign flies away from the gap).
+    # docs/design.md step 5: Δy = +κ_y·e_u (the paper's printed minus sign flies away from the gap).
     step = servo_step((u, 120), 0.02, 0, W, H)
     assert math.copysign(1, step.delta_heading[1]) == sign and step.delta_heading[2] == 0.0
 
@@ -119,8 +119,18 @@ def test_metric_step_removes_most_of_the_offset_and_holds_off_the_wall_until_the
     assert held.delta_heading[0] == 0.0 and not held.push
     big = metric_step((2.0, -2.0), 0.45, 2.0, 0.01, 5, cfg)
     assert big.delta_heading[1:] == (cfg.metric_max_step_m, -cfg.metric_max_step_m)
-    centred = metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg)
+    centred = metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, clearance_here_m=0.45 - math.hypot(0.05, 0.02))
     assert centred.aligned and centred.push and centred.delta_heading[0] > 0
+    # aligned by the tracked place alone, not seen in this frame, and only just fitting: no push; creep on to
+    # see it again; with room to spare, push on the tracked place
+    unseen = metric_step((0.05, 0.02), 0.30, 1.3, 0.1, 5, cfg)
+    assert unseen.aligned and not unseen.push and unseen.delta_heading[0] == pytest.approx(cfg.probe_step_m)
+    assert metric_step((0.05, 0.02), 0.30, 0.85, 0.1, 5, cfg).delta_heading[0] == 0.0   # not that close
+    assert metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, sightings=3).push
+    assert not metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, sightings=2).push    # placed too few times
+    # held still, a frame pair would show no parallax: step back (the next step comes forward again)
+    still = metric_step((0.01, 0.0), 0.30, 0.85, 0.1, 5, cfg)
+    assert still.delta_heading[0] == pytest.approx(-cfg.probe_step_m) and not still.push
     # centred but far from a small-looking wall: move on, do not push yet
     approach = metric_step((0.05, 0.02), 0.45, 2.5, 0.05, 5, cfg)
     assert approach.aligned and not approach.push and approach.delta_heading[0] == pytest.approx(
@@ -133,7 +143,10 @@ def test_the_metric_law_never_pushes_a_sphere_that_would_not_clear():
     cfg = ServoConfig()
     spent = metric_step((0.3, 0.0), 0.45, 1.1, 0.3, cfg.step_budget - 1, cfg)
     assert not spent.push and spent.aligned is False      # the budget is spent, but pushing would touch
-    assert metric_step((0.02, 0.0), 0.45, 1.5, 0.05, cfg.step_budget - 1, cfg).push
+    assert metric_step((0.02, 0.0), 0.45, 1.5, 0.05, cfg.step_budget - 1, cfg, clearance_here_m=0.43).push
+    # seen from where it is: the clearance flying straight on decides, not the offset to the clear centre
+    slot = metric_step((0.3, 0.0), 0.25, 1.2, 0.3, 5, cfg, clearance_here_m=0.25)
+    assert slot.aligned and slot.push        # 0.3 m along a long slot, as much room as at its middle
     narrow = metric_step((0.0, 0.0), 0.2, 1.2, 0.3, 5, cfg)  # 0.4 m across: no offset is good enough
     assert narrow.tolerance_m < 0 and not narrow.push and narrow.aligned is False
 
@@ -148,7 +161,8 @@ def test_metric_servo_converges_on_a_far_off_axis_opening_before_the_wall():
     p = [1.5, 0.0, -1.5]
     for k in range(30):
         distance = gap[0] - p[0]
-        step = metric_step((gap[1] - p[1], gap[2] - p[2]), 0.45, distance, 0.05, k, cfg)
+        off = (gap[1] - p[1], gap[2] - p[2])
+        step = metric_step(off, 0.45, distance, 0.05, k, cfg, clearance_here_m=max(0.0, 0.45 - math.hypot(*off)))
         if step.push:
             break
         p = [p[0] + step.delta_heading[0], p[1] + step.delta_heading[1], p[2] + step.delta_heading[2]]
@@ -177,3 +191,26 @@ def test_far_distance_is_read_from_the_parallax_inside_the_gap():
     assert wall_distance_from_flow(flow, mask, 0.2) == pytest.approx(2.0, rel=0.02)
     assert far_distance_from_flow(flow, mask, 0.0) is None
     assert far_distance_from_flow(flow, np.zeros_like(mask), 0.2) is None
+
+
+def test_the_walls_turn_is_read_from_the_plane_of_its_inverse_depth():
+    from companion.servo import wall_yaw_from_flow
+
+    h, w, f = 240, 320, F
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    xn, yn = (xs - (w - 1) / 2) / f, (ys - (h - 1) / 2) / f
+    for deg in (0.0, 12.0, -18.0):
+        t = math.radians(deg)
+        # a plane 2 m ahead turned by t about the vertical: 1/Z = (cos t − sin t·x/f) / (2 cos t)
+        rho = 0.15 * (math.cos(t) - math.sin(t) * xn) / (2.0 * math.cos(t))
+        flow = np.stack([xn * f * rho, yn * f * rho], -1).astype(np.float32)   # forward translation
+        assert wall_yaw_from_flow(flow, None, f) == pytest.approx(t, abs=0.01)
+
+
+def test_an_opening_seen_at_an_angle_is_judged_at_its_width_in_the_wall():
+    from companion.opening import in_wall
+
+    mask = np.zeros((240, 320), bool)
+    mask[60:180, 120:180] = True                    # 60 px wide seen at 30°: 69 px in the wall's plane
+    wide, radius = in_wall(mask, 1 / math.cos(math.radians(30)))
+    assert radius == pytest.approx(30 / math.cos(math.radians(30)), abs=1.0) and wide.shape == (240, 370)

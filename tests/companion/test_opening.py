@@ -84,3 +84,20 @@ def test_the_clearance_flying_straight_on_counts_the_room_along_an_elongated_ope
     cv2.circle(mask.view(np.uint8), (160, 120), 50, 1, -1)
     assert edge_distance_px(mask, (160.0, 120.0)) == pytest.approx(50.0, abs=1.0)
     assert edge_distance_px(mask, (190.0, 120.0)) == pytest.approx(20.0, abs=1.0)
+
+
+def test_openings_seen_together_are_not_confused_later_when_only_one_of_them_is_in_a_frame():
+    left, right = rect(110, 90, 150, 130), rect(180, 85, 230, 135)      # clear centres 75 px apart (< τ_c)
+    tracker = OpeningTracker()
+    for _ in range(2):
+        first = tracker.observe([cand(left), cand(right)], (0.0, 0.0), None, F, W, H)
+    assert first.detection is right                                    # the wider one
+    # frames that see only the other one: within τ_c of the tracked centre, but it is the other opening
+    for _ in range(2):
+        only_left = tracker.observe([cand(left)], (0.0, 0.0), None, F, W, H)
+        assert only_left.detection is None and only_left.target_px == pytest.approx(right.clear_centre)
+    assert tracker.observe([cand(right)], (0.0, 0.0), None, F, W, H).detection is right
+    # the tracked one gone for good (out of view): the other is taken after three frames in a row, and said so
+    sights = [tracker.observe([cand(left)], (0.0, 0.0), None, F, W, H) for _ in range(3)]
+    assert [s.detection is left for s in sights] == [False, False, True]
+    assert "lost the tracked opening" in sights[2].note
