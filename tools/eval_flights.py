@@ -26,8 +26,8 @@ import argparse
 import json
 import logging
 import math
-import queue
 import sys
+import threading
 import time
 import zlib
 from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -47,6 +47,63 @@ HARD_LATERAL_M = 1.0
 HARD_WIND_MPS = (3.0, 1.0)          # mean up to, gusts up to
 HARD_CAMERA_DELAY_S = (0.03, 0.08)
 IN_VIEW_DEG = 35.0                  # a hard start sees at least one opening within this of its heading
+
+
+class InstancePool:
+    """PX4 instance numbers (port offsets) for flights at once, never shared with another sweep on this machine:
+    each held instance is an exclusive lock on a file in the temporary folder, and its ports must be free.
+    Instances 1-9 and 11-19: not 0, which a user's own SITL may be using; not 10, whose API port 14550 is where
+    every vehicle sends its ground-station streams; and none from 20, whose API ports 14560+ are the truth
+    ports of instances 0 and up."""
+
+    INSTANCES = (*range(1, 10), *range(11, 20))
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._held: dict[int, object] = {}
+
+    def acquire(self) -> int:
+        while True:
+            with self._lock:
+                for n in self.INSTANCES:
+                    if n not in self._held and _ports_free(n):
+                        handle = _try_lock(n)
+                        if handle is not None:
+                            self._held[n] = handle
+                            return n
+            time.sleep(0.5)
+
+    def release(self, n: int) -> None:
+        with self._lock:
+            handle = self._held.pop(n, None)
+        if handle is not None:
+            handle.close()
+
+
+def _try_lock(n: int):
+    import fcntl
+    import tempfile
+
+    handle = open(Path(tempfile.gettempdir()) / f"flowgap-instance-{n}.lock", "w")  # noqa: SIM115
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        return None
+    return handle
+
+
+def _ports_free(n: int) -> bool:
+    """Whether instance n's UDP ports (vehicle 18570+n, 14580+n; companion 14540+n, 14560+n) are free."""
+    import socket
+
+    for port in (18570 + n, 14580 + n, 14540 + n, 14560 + n):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("0.0.0.0", port))
+            except OSError:
+                return False
+    return True
 
 
 def draw_starts(rng: np.random.Generator, k: int, wall_x: float, altitude: float, lateral_m: float = 0.5
@@ -215,20 +272,18 @@ def main(argv: list[str] | None = None) -> int:
     passable = {s: any(passable_openings(specs[s], BODY_RADIUS_M, PASS_MARGIN_M)) for s in scenes}
     jobs = [(scene, i, draw_flight(specs[scene], args.seed, i, args.world))
             for scene in scenes for i in range(args.starts)]
-    instances: queue.Queue[int] = queue.Queue()
-    for n in range(args.jobs):
-        instances.put(20 + n)  # away from instance 0, which a user's own SITL may be using
+    instances = InstancePool()
 
     def fly(job):
         scene, i, flight = job
-        instance = instances.get()
+        instance = instances.acquire()
         try:
             v = launch(scene, args.out / f"{labels[scene]}-{i}", flight["start"], args.speed, instance, args.flow,
                        args.detector, seed=flight["seed"], images=False, log_sink=None, altitude=flight["altitude"],
                        lockstep=not args.realtime, latency_s=args.latency, wind=flight["wind"],
                        camera_delay_s=flight["camera_delay_s"])
         finally:
-            instances.put(instance)
+            instances.release(instance)
         v["scene"] = labels[scene]
         v["start_index"] = i
         return judge(v, passable[scene])

@@ -46,15 +46,24 @@ class Viewpoint:
     motion: tuple[float, float, float]
 
 
-def make_viewpoints(quick: bool = False) -> list[Viewpoint]:
-    """Approach viewpoints: distances 3.0/2.0/1.2 m from the wall (at x = 3), centred or 0.3 m left."""
+def make_viewpoints(quick: bool = False, spec=None) -> list[Viewpoint]:
+    """Approach viewpoints: distances 3.0/2.0/1.2 m from the wall, centred or 0.3 m left.
+
+    For the suite (``spec`` None) in absolute coordinates, as ever: x = 0/1/1.8 before the wall at x = 3, y 0 or
+    -0.3, at 1.5 m.  For another scene, relative to its wall and its (first) opening's centre, which in a random
+    scene may be a metre to the side and at another height."""
     motions = {"fwd": (0.10, 0.0, 0.0), "lat": (0.0, 0.10, 0.0), "diag": (0.08, 0.06, 0.0)}
-    xs = (0.0, 1.0, 1.8)
+    distances = (3.0, 2.0, 1.2)
     ys = (0.0, -0.3)
     if quick:
-        xs, ys, motions = (1.0,), (0.0,), {"diag": motions["diag"], "fwd": motions["fwd"]}
-    return [Viewpoint(f"x{x:.1f}_y{y:+.1f}_{m}", (x, y, -1.5), d) for x in xs for y in ys
-            for m, d in motions.items()]
+        distances, ys, motions = (2.0,), (0.0,), {"diag": motions["diag"], "fwd": motions["fwd"]}
+    if spec is None:
+        wall_x, cy, cz = 3.0, 0.0, -1.5
+    else:
+        poly = np.asarray(spec.openings[0].polygon())
+        wall_x, cy, cz = spec.wall_x, float(poly[:, 0].mean()), float(poly[:, 1].mean())
+    return [Viewpoint(f"x{3.0 - d:.1f}_y{y:+.1f}_{m}", (wall_x - d, cy + y, cz), motion) for d in distances
+            for y in ys for m, motion in motions.items()]
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -84,7 +93,8 @@ def build_backends(specs, raft_weights, raft_iters: int, threads: int):
             if name == "groundtruth":
                 continue            # built per scene
             if name == "raft":
-                options.setdefault("iters", raft_iters)
+                if raft_iters is not None:
+                    options.setdefault("iters", raft_iters)
                 options["num_threads"] = threads
                 if raft_weights:
                     options["weights"] = raft_weights
@@ -233,9 +243,10 @@ def label(tile: np.ndarray, text: str) -> np.ndarray:
 # main
 # ------------------------------------------------------------------------------------------------------------
 
-def evaluate(scenes_list, viewpoints, backend_specs, detectors, *, raft_weights=None, raft_iters=12,
+def evaluate(scenes_list, viewpoints, backend_specs, detectors, *, raft_weights=None, raft_iters=None,
              threads=2, montage_backend="dis:medium", montage_view=None, progress=True):
-    """Run the evaluation; returns (rows, skipped backends, montage rows)."""
+    """Run the evaluation; returns (rows, skipped backends, montage rows).  ``viewpoints``: a list, or a
+    function of a scene's spec that gives its list."""
     from tqdm import tqdm
 
     from companion.flow.colour import flow_to_colour
@@ -245,16 +256,21 @@ def evaluate(scenes_list, viewpoints, backend_specs, detectors, *, raft_weights=
 
     camera = PinholeCamera()
     backends, skipped = build_backends(backend_specs, raft_weights, raft_iters, threads)
-    montage_view = montage_view or viewpoints[len(viewpoints) // 2].name
+    views_of = viewpoints if callable(viewpoints) else (lambda spec: viewpoints)
     rows, montage = [], []
-    bar = tqdm(total=len(scenes_list) * len(viewpoints), desc="pairs", disable=not progress, unit="pair")
+    bar = None
     for scene in scenes_list:
         spec, cloud = load_scene(scene)
+        name = spec.name if spec is not None else str(scene)     # spec paths are reported by their scene's name
+        views = views_of(spec)
+        if bar is None:
+            bar = tqdm(total=len(scenes_list) * len(views), desc="pairs", disable=not progress, unit="pair")
+            montage_view = montage_view or views[len(views) // 2].name
         if any(parse_backend(b)[0] == "groundtruth" for b in backend_specs):
             from companion.flow.groundtruth import GroundTruthBackend
 
             backends["groundtruth"] = GroundTruthBackend(spec, camera)
-        for vp in viewpoints:
+        for vp in views:
             pose1 = Pose(vp.position)
             pose2 = Pose(tuple(p + d for p, d in zip(vp.position, vp.motion, strict=True)))
             r1 = render_splats(cloud, camera, pose1)
@@ -272,14 +288,14 @@ def evaluate(scenes_list, viewpoints, backend_specs, detectors, *, raft_weights=
                 flow_ms = 1e3 * (time.perf_counter() - t0)
                 flow = np.nan_to_num(flow, nan=0.0)
                 if bname == montage_backend and vp.name == montage_view:
-                    tiles = [label(r1.rgb, f"{scene} {vp.name}"), label(flow_to_colour(flow), bname)]
+                    tiles = [label(r1.rgb, f"{name} {vp.name}"), label(flow_to_colour(flow), bname)]
                 for dname in detectors:
                     t0 = time.perf_counter()
                     det = run_detector(dname, flow, camera, pose1, pose2)
                     det_ms = 1e3 * (time.perf_counter() - t0)
                     err = (None if det.centroid is None or truth_c is None
                            else float(np.hypot(det.centroid[0] - truth_c[0], det.centroid[1] - truth_c[1])))
-                    rows.append({"scene": scene, "viewpoint": vp.name, "backend": bname, "detector": dname,
+                    rows.append({"scene": name, "viewpoint": vp.name, "backend": bname, "detector": dname,
                                  "iou": iou(det.mask, truth), "centroid_err_px": err, "detected": det.found,
                                  "ms": flow_ms + det_ms, "flow_ms": flow_ms, "detect_ms": det_ms,
                                  "truth_area_px": int(truth.sum()), "reason": det.reason})
@@ -288,7 +304,8 @@ def evaluate(scenes_list, viewpoints, backend_specs, detectors, *, raft_weights=
             if tiles is not None:
                 montage.append(np.concatenate(tiles, axis=1))
             bar.update(1)
-    bar.close()
+    if bar is not None:
+        bar.close()
     return rows, skipped, montage
 
 
@@ -299,14 +316,21 @@ def main(argv: list[str] | None = None) -> int:
                     "(IoU with ground truth, centroid error, detection rate, time). Writes JSON, Markdown "
                     "and a montage PNG; prints the summary table.")
     parser.add_argument("--scenes", nargs="*", default=None,
-                        help="scene names (default: the 16-scene suite scenes.library.SUITE)")
+                        help="scene names or spec paths (default: the 16-scene suite scenes.library.SUITE, unless "
+                             "--random is given)")
+    parser.add_argument("--random", type=int, default=0, metavar="N",
+                        help="also evaluate N random scenes (scenes.random_scene, the suite's texture families; "
+                             "the scenes flowgap-eval-flights --random N --seed S flies), viewpoints placed "
+                             "relative to each one's opening; specs saved under OUT/scenes")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the --random scenes (default 0)")
     parser.add_argument("--backends", nargs="*", default=list(DEFAULT_BACKENDS),
                         help="flow backends, 'dis:<preset>' / 'raft:<variant>' allowed (default: %(default)s); "
                              "a backend that cannot be built (e.g. RAFT without weights) is skipped and reported")
     parser.add_argument("--detectors", nargs="*", default=list(DEFAULT_DETECTORS),
                         help="gap detectors (default: %(default)s)")
     parser.add_argument("--raft-weights", type=Path, default=None, help="RAFT weights file (default: backend's)")
-    parser.add_argument("--raft-iters", type=int, default=12, help="RAFT iterations (default: %(default)s)")
+    parser.add_argument("--raft-iters", type=int, default=None,
+                        help="RAFT iterations (default: the weights file's own setting)")
     parser.add_argument("--threads", type=int, default=2, help="torch/OpenCV threads (default: %(default)s)")
     parser.add_argument("--quick", action="store_true", help="2 viewpoint pairs per scene instead of 18")
     parser.add_argument("--montage-backend", default="dis:medium",
@@ -323,8 +347,17 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError as exc:
         print(f"flowgap-eval-masks: the scenes package is not available ({exc})", file=sys.stderr)
         return 2
-    scenes_list = args.scenes or list(SUITE)
-    viewpoints = make_viewpoints(args.quick)
+    if args.random < 0:
+        print("flowgap-eval-masks: error: --random must be >= 0", file=sys.stderr)
+        return 2
+    from tools.eval_flights import random_scene_files
+
+    scenes_list = list(args.scenes or ([] if args.random else SUITE))
+    scenes_list += random_scene_files(args.random, args.seed, args.out_dir / "scenes")
+    suite = set(SUITE)
+
+    def viewpoints(spec):
+        return make_viewpoints(args.quick, None if spec.name in suite else spec)
     t0 = time.perf_counter()
     rows, skipped, montage = evaluate(scenes_list, viewpoints, args.backends, args.detectors,
                                       raft_weights=args.raft_weights, raft_iters=args.raft_iters,
@@ -337,12 +370,13 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarise(rows)
     goals = check_goals(summary)
     args.out_dir.mkdir(parents=True, exist_ok=True)
-    meta = {"scenes": scenes_list, "viewpoints": [vp.__dict__ for vp in viewpoints], "backends": args.backends,
+    meta = {"scenes": scenes_list, "random": args.random, "seed": args.seed,
+            "viewpoints": [vp.__dict__ for vp in make_viewpoints(args.quick)], "backends": args.backends,
             "detectors": args.detectors, "skipped_backends": skipped, "seconds": time.perf_counter() - t0,
             "ground_truth": "scenes.groundtruth (label image of frame 1; occlusion-checked depth flow)"}
     (args.out_dir / "eval_masks.json").write_text(json.dumps(
         {"meta": meta, "summary": summary, "goals": goals, "rows": rows}, indent=1) + "\n")
-    md = markdown(summary, goals, skipped, len(scenes_list), len(viewpoints))
+    md = markdown(summary, goals, skipped, len(scenes_list), len(make_viewpoints(args.quick)))
     (args.out_dir / "eval_masks.md").write_text(md)
     if montage:
         width = max(m.shape[1] for m in montage)

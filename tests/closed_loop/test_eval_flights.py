@@ -53,3 +53,21 @@ def test_bad_arguments_are_one_line_errors(tmp_path, capsys):
     assert main(["no_such_scene", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("flowgap-eval-flights: error:") for line in err)
+
+
+def test_two_sweeps_on_one_machine_never_share_an_instance():
+    import socket
+
+    from tools.eval_flights import InstancePool
+
+    first, second = InstancePool(), InstancePool()       # as two flowgap-eval-flights processes would hold them
+    a = [first.acquire() for _ in range(2)]
+    busy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    busy.bind(("0.0.0.0", 14540 + max(a) + 1))             # a port of the next instance taken by something else
+    try:
+        b = [second.acquire() for _ in range(2)]
+        assert not set(a) & set(b) and max(a) + 1 not in b
+    finally:
+        busy.close()
+    first.release(a[0])
+    assert second.acquire() == a[0]                        # released, it is free again

@@ -26,7 +26,7 @@ def _setpoints(tlog: Path) -> list[tuple]:
 
 
 def _fly(run_dir: Path, latency_s: float = 0.0) -> dict:
-    return launch(SCENE, run_dir, start=(0.0, 0.1, 0.0), instance=41, images=False, log_sink=None,
+    return launch(SCENE, run_dir, start=(0.0, 0.1, 0.0), instance=7, images=False, log_sink=None,
                   lockstep=True, latency_s=latency_s, seed=3, timeout_s=120)
 
 

@@ -87,3 +87,23 @@ def test_eval_masks_cli_smoke(tmp_path):
     assert all(r["detected"] and r["iou"] > 0.8 for r in parallax)
     assert (tmp_path / "eval_masks.md").read_text().startswith("# Gap masks")
     assert (tmp_path / "montage.png").stat().st_size > 1000
+
+
+def test_eval_masks_on_random_scenes_places_the_viewpoints_before_each_opening(tmp_path):
+    from scenes.library import random_scene
+    from tools.eval_masks import main, make_viewpoints
+
+    spec = random_scene(np.random.default_rng([4, 0xF1, 0]))
+    poly = np.asarray(spec.openings[0].polygon())
+    views = make_viewpoints(spec=spec)
+    assert sorted({round(v.position[1], 9) for v in views}) == pytest.approx(
+        sorted([poly[:, 0].mean(), poly[:, 0].mean() - 0.3]))
+    assert {round(spec.wall_x - v.position[0], 6) for v in views} == {3.0, 2.0, 1.2}
+    assert make_viewpoints()[0].position == (0.0, 0.0, -1.5)              # the suite's stay where they were
+    rc = main(["--quick", "--random", "2", "--seed", "4", "--backends", "dis:medium", "--detectors", "parallax",
+               "--out-dir", str(tmp_path), "--no-progress"])
+    assert rc == 0
+    data = json.loads((tmp_path / "eval_masks.json").read_text())
+    assert {r["scene"] for r in data["rows"]} == {spec.name, random_scene(np.random.default_rng([4, 0xF1, 1])).name}
+    assert len(list((tmp_path / "scenes").glob("*.json"))) == 2 and data["meta"]["seed"] == 4
+    assert np.median([r["iou"] for r in data["rows"]]) > 0.6

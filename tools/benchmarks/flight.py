@@ -9,6 +9,7 @@ import statistics
 import tempfile
 from pathlib import Path
 
+from tools.eval_flights import InstancePool
 from tools.launch import launch
 
 RUNS = 3
@@ -16,15 +17,20 @@ RUNS = 3
 
 def run() -> dict:
     walls, latencies, successes = [], [], 0
-    with tempfile.TemporaryDirectory() as tmp:
-        for i in range(RUNS):
-            run_dir = Path(tmp) / f"demo-{i}"
-            verdict = launch("window1_brick", run_dir, speed=2.0, instance=30, images=False, log_sink=None)
-            walls.append(verdict["wall_time_s"])
-            successes += bool(verdict["success"])
-            for line in (run_dir / "companion" / "decisions.jsonl").read_text().splitlines():
-                t = json.loads(line)["timing"]
-                latencies.append(t["capture_ms"] + t["flow_ms"] + t["detect_ms"])
+    pool = InstancePool()
+    instance = pool.acquire()
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            for i in range(RUNS):
+                run_dir = Path(tmp) / f"demo-{i}"
+                verdict = launch("window1_brick", run_dir, speed=2.0, instance=instance, images=False, log_sink=None)
+                walls.append(verdict["wall_time_s"])
+                successes += bool(verdict["success"])
+                for line in (run_dir / "companion" / "decisions.jsonl").read_text().splitlines():
+                    t = json.loads(line)["timing"]
+                    latencies.append(t["capture_ms"] + t["flow_ms"] + t["detect_ms"])
+    finally:
+        pool.release(instance)
     return {
         "flight.demo_wall_s": {"value": round(statistics.median(walls), 2),
                                "unit": f"s wall per demo flight (window1_brick, speed x2, median of {RUNS}; "
