@@ -2,7 +2,7 @@
 
 Two detectors share one result type, :class:`GapDetection`:
 
-- :func:`detect_gap` is the paper's pipeline (DESIGN.md step 3, paper II.C): colour the flow with the
+- :func:`detect_gap` is the paper's pipeline (docs/design.md step 3, paper II.C): colour the flow with the
   Middlebury wheel → BGR image → grey → Gaussian blur 5×5 → Canny(10, 40) → morphological closing 3×3 ×3 →
   external contours → keep 0.001·HW ≤ area ≤ 0.9·HW → largest → centroid from moments → filled mask.
 - :func:`detect_gap_parallax` is ours: it works on the flow *vectors*, not on colour grey levels that

@@ -1,4 +1,4 @@
-"""Temporal consistency of the gap centroid (DESIGN.md step 4, paper II.D, eq. 14).
+"""Temporal consistency of the gap centroid (docs/design.md step 4, paper II.D, eq. 14).
 
 :class:`CentroidFilter` applies the paper's rule with τ_c = 80 px:
 

@@ -1,6 +1,6 @@
 """CPU backend: numba kernels, staged project -> sort/bin -> rasterise (maths in ``render.common``).
 
-Loop order (see DESIGN.md performance notes): our scenes are dense, coplanar, small splats, so each
+Loop order (see docs/design.md, performance notes): our scenes are dense, coplanar, small splats, so each
 Gaussian is scattered front to back over the pixels of its own 3-sigma box, with per-pixel
 transmittance and the early-out. The image is cut into horizontal bands; each band has the depth-sorted
 list of Gaussians that touch it, and bands are interleaved over the worker threads.

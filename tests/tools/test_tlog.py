@@ -16,7 +16,7 @@ from pymavlink.dialects.v20 import common as mav2
 from tools.tlog import analyse_tlog, main, write_outputs
 from tools.tlog.framing import crc_x25, decode_columns, load_dialect, scan_tlog
 
-TESTDATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "testdata"
+TESTDATA = Path(__file__).resolve().parents[2] / "tests" / "data"
 ARDUSUB = TESTDATA / "ardusub-qgc-small.tlog"
 T0_US = 1_750_000_000_000_000  # an arbitrary UNIX time in µs
 

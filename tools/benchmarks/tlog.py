@@ -3,7 +3,7 @@
 ``tlog.msgs_per_s``: messages per second through ``analyse_tlog`` + ``write_outputs(plots=False)``
 (report.md and metrics.json; everything but plotting), median of several runs, on a synthetic ~200k-message
 flowgap-like tlog generated with pymavlink in a temporary directory. Also reported: the same on the
-third-party ArduSub log when ``../shared/testdata`` is present, and pymavlink's plain ``recv_match`` loop on
+third-party ArduSub log in ``tests/data``, and pymavlink's plain ``recv_match`` loop on
 the synthetic log as the baseline.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 
 REPEATS = 5
 N_TARGET = 200_000
-TESTDATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "testdata" / "ardusub-qgc-small.tlog"
+TESTDATA = Path(__file__).resolve().parents[2] / "tests" / "data" / "ardusub-qgc-small.tlog"
 
 
 def make_synthetic_tlog(path: Path, n_target: int = N_TARGET, seed: int = 0) -> int:
