@@ -178,7 +178,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rpy", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("ROLL", "PITCH", "YAW"),
                    help="body attitude in degrees (default level, facing north)")
     p.add_argument("--backend", choices=("cpu", "torch", "reference"), default="cpu", help="renderer")
-    p.add_argument("-o", "--output", default="render.png", help="output PNG (default %(default)s)")
+    p.add_argument("-o", "--out", "--output", dest="output", metavar="PNG",
+                   default="render.png", help="output PNG (default %(default)s)")
     _add_camera_args(p)
     cache_arg(p)
     p.set_defaults(func=cmd_render)
@@ -190,7 +191,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("montage", help="all 16 suite scenes from the start pose in one PNG",
                        description="Render every suite scene from the start pose into a 4x4 grid.")
-    p.add_argument("-o", "--output", default="suite_montage.png", help="output PNG (default %(default)s)")
+    p.add_argument("-o", "--out", "--output", dest="output", metavar="PNG",
+                   default="suite_montage.png", help="output PNG (default %(default)s)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     _add_camera_args(p, 200, 150)
     cache_arg(p)

@@ -81,7 +81,8 @@ def main(argv: list[str] | None = None) -> int:
         description="Run flowgap's benchmarks and merge the medians into bench/results.json.",
     )
     parser.add_argument("groups", nargs="*", help=f"groups to run (default: all of {available_groups()})")
-    parser.add_argument("--output", type=Path, default=RESULTS, help="results file (default: %(default)s)")
+    parser.add_argument("-o", "--out", "--output", dest="output", metavar="FILE", type=Path, default=RESULTS,
+                        help="results file (default: %(default)s)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     groups = args.groups or available_groups()

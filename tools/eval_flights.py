@@ -247,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
                         "costs in simulated time)")
     p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"])
-    p.add_argument("--out", type=Path, default=Path("runs/eval_flights"), help="output directory")
+    p.add_argument("-o", "--out", type=Path, default=Path("runs/eval_flights"), help="output directory")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     from scenes.build import resolve_spec

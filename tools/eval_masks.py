@@ -5,7 +5,7 @@ lateral or diagonal move), every flow backend computes the flow from frame 1 to 
 turns it into a gap mask.  Compared with the ground-truth gap mask of frame 1 (the pixels whose line of sight
 passes through the opening) it records IoU, centroid error, detection and time.
 
-Outputs (in ``--out-dir``): ``eval_masks.json`` (``rows`` with scene, viewpoint, backend, detector, iou,
+Outputs (in ``-o/--out``): ``eval_masks.json`` (``rows`` with scene, viewpoint, backend, detector, iou,
 centroid_err_px, detected, ms, flow_ms, detect_ms; ``summary`` per backend × detector; ``goals``),
 ``eval_masks.md`` (Markdown tables) and ``montage.png`` (per scene: frame, flow colour, each detector's mask
 over the ground truth: green = truth only, red = detection only, yellow = both, cross = centroid).
@@ -335,7 +335,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="2 viewpoint pairs per scene instead of 18")
     parser.add_argument("--montage-backend", default="dis:medium",
                         help="backend whose flow the montage shows (default: %(default)s)")
-    parser.add_argument("--out-dir", type=Path, default=Path("runs/eval_masks"),
+    parser.add_argument("-o", "--out", "--out-dir", dest="out_dir", metavar="DIR", type=Path,
+                        default=Path("runs/eval_masks"),
                         help="output folder (default: %(default)s)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)

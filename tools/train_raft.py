@@ -562,7 +562,7 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--val-every", dest="val_every", type=int, default=200,
                    help="validate every N steps (0: only at the end)")
     o = p.add_argument_group("output and runtime")
-    o.add_argument("--out", default="runs/raft-train", help="output directory")
+    o.add_argument("-o", "--out", default="runs/raft-train", help="output directory")
     o.add_argument("--save-every", dest="save_every", type=int, default=200,
                    help="checkpoint every N steps (0: only at the end)")
     o.add_argument("--stop-at", dest="stop_at", type=int, default=None, metavar="STEP",

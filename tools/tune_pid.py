@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="airframe to analyse (default: %(default)s)")
     parser.add_argument("--physics-hz", type=float, default=500.0,
                         help="physics / rate-loop frequency in Hz (default: %(default)s)")
-    parser.add_argument("--out", type=Path, default=Path("out/tune_pid"),
+    parser.add_argument("-o", "--out", type=Path, default=Path("out/tune_pid"),
                         help="output directory for PNGs and margins.json (default: %(default)s)")
     parser.add_argument("--min-pm", type=float, default=45.0,
                         help="required phase margin in degrees for exit status 0 (default: %(default)s)")

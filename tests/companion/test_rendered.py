@@ -75,7 +75,7 @@ def test_eval_masks_cli_smoke(tmp_path):
     from tools.eval_masks import main
 
     rc = main(["--quick", "--scenes", "window1_brick", "--backends", "dis:medium", "raft", "--detectors",
-               "parallax", "paper", "--out-dir", str(tmp_path), "--no-progress", "--raft-weights",
+               "parallax", "paper", "--out", str(tmp_path), "--no-progress", "--raft-weights",
                str(tmp_path / "missing.pth")])
     assert rc == 0
     data = json.loads((tmp_path / "eval_masks.json").read_text())
@@ -101,7 +101,7 @@ def test_eval_masks_on_random_scenes_places_the_viewpoints_before_each_opening(t
     assert {round(spec.wall_x - v.position[0], 6) for v in views} == {3.0, 2.0, 1.2}
     assert make_viewpoints()[0].position == (0.0, 0.0, -1.5)              # the suite's stay where they were
     rc = main(["--quick", "--random", "2", "--seed", "4", "--backends", "dis:medium", "--detectors", "parallax",
-               "--out-dir", str(tmp_path), "--no-progress"])
+               "--out", str(tmp_path), "--no-progress"])
     assert rc == 0
     data = json.loads((tmp_path / "eval_masks.json").read_text())
     assert {r["scene"] for r in data["rows"]} == {spec.name, random_scene(np.random.default_rng([4, 0xF1, 1])).name}
