@@ -63,6 +63,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "time (default 0)")
     p.add_argument("--run-dir", type=Path, help="run log directory (default runs/<time>)")
     p.add_argument("--no-images", action="store_true", help="do not save per-step PNGs (faster evaluations)")
+    p.add_argument("--rerun", nargs="?", const="", default=None, metavar="FILE",
+                   help="record the flight for the Rerun viewer in FILE (default RUN_DIR/flight.rrd); needs the "
+                        "extra: pip install 'flowgap[viz]'")
+    p.add_argument("--rerun-connect", metavar="ADDRESS",
+                   help="stream the recording live to a running Rerun viewer instead "
+                        "(e.g. rerun+http://127.0.0.1:9876/proxy)")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return p
 
@@ -77,9 +83,10 @@ def make_flow(spec: str, raft_weights: Path | None):
     return make_flow_backend(name, **options)
 
 
-def _close(clock) -> None:
-    if clock is not None:
-        clock.close()
+def _close(*things) -> None:
+    for thing in things:
+        if thing is not None:
+            thing.close()
 
 
 def _interrupt(_signum, _frame) -> None:
@@ -99,6 +106,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"flowgap-companion: error: --lockstep needs --link pymavlink: the {args.link} link cannot run "
               f"in lockstep (mavsdk_server keeps its own wall-clock timers)", file=sys.stderr)
         return 2
+    recording = None
+    if args.rerun is not None or args.rerun_connect:
+        from companion.recording import RecordingError, open_recording
+        try:
+            recording = open_recording(Path(args.rerun) if args.rerun else run_dir / "flight.rrd",
+                                       args.rerun_connect)
+        except RecordingError as exc:
+            print(f"flowgap-companion: error: {exc}", file=sys.stderr)
+            return 2
     clock = None
     try:
         parse_endpoint(args.connect)
@@ -112,23 +128,29 @@ def main(argv: list[str] | None = None) -> int:
                              delay_s=args.camera_delay)
     except (ValueError, KeyError, FileNotFoundError, OSError, LockstepError) as exc:
         print(f"flowgap-companion: error: {exc}", file=sys.stderr)
-        _close(clock)
+        _close(clock, recording)
         return 2
     except Exception as exc:  # noqa: BLE001 — weights/scene errors from other packages: one line, not a traceback
         print(f"flowgap-companion: error: {type(exc).__name__}: {exc}", file=sys.stderr)
-        _close(clock)
+        _close(clock, recording)
         return 2
     runlog = RunLog(run_dir, images=not args.no_images)
+    if recording is not None:
+        recording.truth = lambda: camera.poses.latest(0.0)
+        recording.scene(camera.spec, camera.cloud)
+        recording.camera(camera.K, camera.width, camera.height)
     try:
         link = make_link(args.connect, args.link, tlog_path=runlog.tlog_path, clock=clock)
     except (ValueError, LinkError, ImportError) as exc:
         print(f"flowgap-companion: error: {exc}", file=sys.stderr)
         camera.close()
-        clock.close()
+        _close(clock, recording)
         return 2
+    if recording is not None:
+        link.telemetry.listeners.append(recording.telemetry)
     mission = Mission(link, camera, flow, detector, runlog,
                       config=MissionConfig(altitude_m=args.altitude, finish=args.finish,
-                                           perception_latency_s=args.latency))
+                                           perception_latency_s=args.latency), recording=recording)
     signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops us with SIGTERM: end like Ctrl-C
     try:
         result = mission.run()
@@ -152,6 +174,10 @@ def main(argv: list[str] | None = None) -> int:
         [f"companion: {result.state.value.upper()}{push} after {result.servo_steps} servo steps"
          + (f" ({result.reason})" if result.reason else "")]))
     log.info("storyboard: %s", board)
+    if recording is not None:
+        recording.event(f"companion: {result.state.value.upper()}" + (f" ({result.reason})" if result.reason else ""))
+        recording.close()
+        log.info("rerun recording: %s", args.rerun_connect or (args.rerun or run_dir / "flight.rrd"))
     runlog.close()
     print(json.dumps({k: summary[k] for k in ("state", "reason", "servo_steps", "push_length_m")}))
     log.info("run log in %s", run_dir)

@@ -98,7 +98,7 @@ class Mission:
     def __init__(self, link: AutopilotLink, camera: FrameSource, flow, detector, runlog: RunLog,
                  servo: ServoConfig | None = None, config: MissionConfig | None = None,
                  tracker: CentroidFilter | None = None, derotate_flow: bool = True,
-                 openings: OpeningConfig | None = None):
+                 openings: OpeningConfig | None = None, recording=None):
         self.link = link
         self.camera = camera
         self.flow = flow
@@ -115,6 +115,7 @@ class Mission:
         self.derotate = derotate_flow
         self.result = MissionResult(State.CONNECT)
         self.storyboard = Storyboard()   # what it saw and decided, step by step (companion.storyboard)
+        self.recording = recording      # a Rerun recording of the flight (companion.recording), or None
         self.clock = link.clock     # every wait and timeout on the link's clock (wall, or lockstep)
         self._t0 = time.monotonic()
         self._t0_clock = self.clock.now()
@@ -140,6 +141,7 @@ class Mission:
             start = self.link.telemetry.position
             self.yaw = self.link.telemetry.attitude_euler[2]
             self.link.start_offboard(start, self.yaw)
+            self._recorded_setpoint(start)
             self._enter(State.SERVO)
             waypoint, bias, wall_distance = self._servo(start)
             self._enter(State.TRAVERSE)
@@ -172,6 +174,9 @@ class Mission:
         prev_position = self.link.telemetry.position
         self._log_frame(0, prev, prev_position, prev_attitude)
         self.runlog.save_images(0, rgb=prev.rgb)
+        if self.recording is not None:
+            self.recording.frame(0, prev.time_s, prev.rgb, None, None, position_true=prev.position,
+                                 attitude_true=prev.attitude, text="step 0: the first frame")
         waypoint = start
         step = servo_step(None, 0.0, 0, width, height, cfg)
         wall_distance = None
@@ -186,7 +191,7 @@ class Mission:
             t_step = self.clock.now()
             delta = heading_to_ned(step.delta_heading, self.yaw)
             waypoint = (waypoint[0] + delta[0], waypoint[1] + delta[1], waypoint[2] + delta[2])
-            self.link.set_position_target(waypoint, self.yaw)
+            self._send(waypoint)
             arrived = self.link.wait_position(waypoint, self.config.arrival_tolerance_m,
                                               self.config.step_timeout_s, self.config.arrival_speed_mps)
             self._settle()
@@ -232,6 +237,7 @@ class Mission:
                                      moved, wall_yaw)
             if sight.note:
                 log.info("%s", sight.note)
+                self._event(sight.note)
             if sight.refusal:
                 raise Refusal(sight.refusal)
             detection = sight.detection if sight.detection is not None else top
@@ -265,10 +271,13 @@ class Mission:
             self.runlog.save_images(k + 1, rgb=frame.rgb, flow_bgr=flow_bgr, mask=detection.mask)
             state = ("push" if next_step.push else "aligned" if next_step.aligned else
                      "close" if next_step.close else "servo") + (f"; {sight.note}" if sight.note else "")
-            self.storyboard.add(StoryRow(
-                k + 1, frame.rgb, flow_bgr[:, :, ::-1], detection.mask, detection.centroid,
-                None if used is None else tilted_pixel(used, self.camera.K, attitude[0], attitude[1]),
-                step_text(k + 1, next_step.error, next_step.delta_heading, wall_distance, state)))
+            row = StoryRow(k + 1, frame.rgb, flow_bgr[:, :, ::-1], detection.mask, detection.centroid,
+                           None if used is None else tilted_pixel(used, self.camera.K, attitude[0], attitude[1]),
+                           step_text(k + 1, next_step.error, next_step.delta_heading, wall_distance, state))
+            self.storyboard.add(row)
+            if self.recording is not None:
+                self.recording.frame(row.step, frame.time_s, row.frame, row.flow_rgb, row.mask, row.raw, row.used,
+                                     frame.position, frame.attitude, next_step.error, wall_distance, row.text)
             self.runlog.decision({
                 "step": k + 1, "t_wall_s": time.monotonic() - self._t0, "t_clock_s": self.clock.now() - self._t0_clock,
                 "frame_time_s": frame.time_s,
@@ -306,6 +315,18 @@ class Mission:
             self.result.far_distance_m = float(np.median(far_estimates)) - here
         return waypoint, step.delta_heading[1:], wall_distance
 
+    def _send(self, waypoint) -> None:
+        self.link.set_position_target(waypoint, self.yaw)
+        self._recorded_setpoint(waypoint)
+
+    def _recorded_setpoint(self, waypoint) -> None:
+        if self.recording is not None:
+            self.recording.setpoint(waypoint)
+
+    def _event(self, text: str, level: str = "INFO") -> None:
+        if self.recording is not None:
+            self.recording.event(text, level)
+
     def _settle(self) -> None:
         """Wait for a level attitude before the next frame (bounded: a windy or tilted vehicle still flies)."""
         tilt = self.config.capture_tilt_rad
@@ -335,7 +356,7 @@ class Mission:
         points = push_waypoints(start, self.yaw, length, bias, self.servo)
         period = 1.0 / 20.0  # one increment per setpoint period: ~1 m/s, level
         for p in points:
-            self.link.set_position_target(p, self.yaw)
+            self._send(p)
             self.link.check_alive()
             self.clock.sleep(period)
         self.link.wait_position(points[-1], 0.1, self.config.step_timeout_s, 0.3)
@@ -345,10 +366,12 @@ class Mission:
         self.result.state = state
         self.result.states.append((round(self.clock.now() - self._t0_clock, 3), state.value))
         log.info("state: %s", state.value.upper())
+        self._event(f"state: {state.value.upper()}")
 
     def _refuse(self, reason: str) -> None:
         """Decline the opening: hold where the vehicle is, and say why (a refused flight touches nothing)."""
         log.warning("refused in %s: %s", self.result.state.value.upper(), reason)
+        self._event(f"refused: {reason}", "WARN")
         self.result.reason = reason
         self._enter(State.REFUSED)
         try:
@@ -358,6 +381,7 @@ class Mission:
 
     def _fail(self, reason: str, safe: bool) -> None:
         log.error("mission failed in %s: %s", self.result.state.value.upper(), reason)
+        self._event(f"failed: {reason}", "ERROR")
         failed_in = self.result.state
         self.result.reason = f"{failed_in.value}: {reason}"
         self._enter(State.FAILED)

@@ -60,13 +60,14 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
            timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float = 1.5,
            link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0,
            wind: tuple[float, ...] | None = None, yaw_deg: float | None = None,
-           camera_delay_s: float = 0.0) -> dict:
+           camera_delay_s: float = 0.0, rerun: bool = False, rerun_connect: str | None = None) -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json).
 
     ``lockstep``: both processes on the vehicle's clock (``speed`` is then unused); ``latency_s``: the
     companion's camera-to-setpoint latency; ``wind``: (mean m/s, gust m/s[, from deg]) on the vehicle;
     ``yaw_deg``: the start heading (default: the scene's ``start_yaw_deg``); ``camera_delay_s``: how long after
-    exposure each camera frame reaches the companion."""
+    exposure each camera frame reaches the companion; ``rerun``: the companion records the flight in
+    ``run_dir/flight.rrd`` (``rerun_connect``: streams it to a running viewer instead)."""
     if yaw_deg is None:
         from scenes.build import resolve_spec
 
@@ -92,6 +93,10 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         companion_cmd.append("--no-images")
     if lockstep:
         companion_cmd.append("--lockstep")
+    if rerun_connect:
+        companion_cmd += ["--rerun-connect", rerun_connect]
+    elif rerun:
+        companion_cmd += ["--rerun", str(run_dir / "flight.rrd")]
     t0 = time.monotonic()
     companion = _start(companion_cmd, "[companion]", log_sink)
     vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink)
@@ -148,6 +153,8 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
 
         append_footer(board, [f"vehicle's verdict: {describe(verdict)}"])
         verdict["storyboard"] = str(board)
+    if rerun and not rerun_connect and (run_dir / "flight.rrd").exists():
+        verdict["rerun"] = str(run_dir / "flight.rrd")
     if not vehicle_verdict:
         verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
     (run_dir / "verdict.json").write_text(json.dumps(verdict, indent=2) + "\n")
@@ -194,6 +201,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--result", type=Path, help="also write the verdict JSON here")
     p.add_argument("--timeout", type=float, default=300.0, help="wall seconds before giving up (default 300)")
     p.add_argument("--quiet", action="store_true", help="do not stream the two processes' logs")
+    p.add_argument("--rerun", action="store_true",
+                   help="record the flight for the Rerun viewer in RUN_DIR/flight.rrd (extra: flowgap[viz])")
+    p.add_argument("--rerun-connect", metavar="ADDRESS",
+                   help="stream the recording live to a running Rerun viewer instead")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s sitl %(levelname)s %(message)s")
     if not args.speed > 0:
@@ -206,11 +217,20 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 — unknown scene names and bad spec files: one line
         print(f"flowgap-sitl: error: scene {args.scene!r}: {exc}", file=sys.stderr)
         return 2
+    if args.rerun or args.rerun_connect:
+        from companion.recording import RecordingError, require_rerun
+
+        try:
+            require_rerun()
+        except RecordingError as exc:
+            print(f"flowgap-sitl: error: {exc}", file=sys.stderr)
+            return 2
     run_dir = args.run_dir or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.scene}"
     verdict = launch(args.scene, run_dir, args.start, args.speed, args.instance, args.flow, args.detector,
                      args.seed, args.no_noise, args.timeout, log_sink=None if args.quiet else sys.stdout,
                      link=args.link, lockstep=args.lockstep, latency_s=args.latency, wind=args.wind,
-                     yaw_deg=args.yaw, camera_delay_s=args.camera_delay)
+                     yaw_deg=args.yaw, camera_delay_s=args.camera_delay, rerun=args.rerun,
+                     rerun_connect=args.rerun_connect)
     if args.result:
         args.result.parent.mkdir(parents=True, exist_ok=True)
         args.result.write_text(json.dumps(verdict, indent=2) + "\n")
@@ -218,6 +238,8 @@ def main(argv: list[str] | None = None) -> int:
     print(describe(verdict))
     if verdict.get("storyboard"):
         print(f"storyboard: {verdict['storyboard']}")
+    if verdict.get("rerun"):
+        print(f"rerun recording: {verdict['rerun']} (rerun {verdict['rerun']})")
     return 0 if verdict["success"] else 1
 
 

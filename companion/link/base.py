@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import abc
 import bisect
+import logging
 import math
 import threading
 from collections import deque
@@ -15,6 +16,8 @@ from dataclasses import dataclass, field
 from urllib.parse import urlparse
 
 from companion.clock import Clock, WallClock
+
+log = logging.getLogger(__name__)
 
 
 class LinkError(RuntimeError):
@@ -108,6 +111,16 @@ class TelemetryCache:
     # (autopilot time s, roll, pitch, yaw): to read the attitude at a camera frame's time stamp
     attitude_history: deque = field(default_factory=lambda: deque(maxlen=2000), repr=False)  # 40 s at 50 Hz
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    # called with (autopilot time s, position=..., attitude=...) on each position or attitude update, on the
+    # link's receive thread (a recording of the flight: companion.recording)
+    listeners: list = field(default_factory=list, repr=False)
+
+    def notify(self, time_s: float, **values) -> None:
+        for listener in list(self.listeners):
+            try:
+                listener(time_s, **values)
+            except Exception:  # noqa: BLE001 — an observer must never stop the link
+                log.exception("telemetry listener failed")
 
     def attitude_at(self, time_s: float) -> tuple[float, float, float]:
         """Attitude (roll, pitch, yaw) at an autopilot time stamp, interpolated between samples (nearest

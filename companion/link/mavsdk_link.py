@@ -95,12 +95,15 @@ class MavsdkLink(AutopilotLink):
                 t.position = (pv.position.north_m, pv.position.east_m, pv.position.down_m)
                 t.velocity = (pv.velocity.north_m_s, pv.velocity.east_m_s, pv.velocity.down_m_s)
                 t.position_time = self.clock.now()
+                stamp = t.attitude_history[-1][0] if t.attitude_history else 0.0
+            t.notify(stamp, position=t.position)
 
         def attitude(e, _):
             rpy = (math.radians(e.roll_deg), math.radians(e.pitch_deg), math.radians(e.yaw_deg))
             with t.lock:
                 t.attitude_euler = rpy
                 t.attitude_history.append((e.timestamp_us * 1e-6, *rpy))
+            t.notify(e.timestamp_us * 1e-6, attitude=rpy)
 
         def armed(value, _):
             with t.lock:

@@ -143,10 +143,12 @@ class PymavlinkLink(AutopilotLink):
                 t.position = (msg.x, msg.y, msg.z)
                 t.velocity = (msg.vx, msg.vy, msg.vz)
                 t.position_time = self.clock.now()
+            t.notify(msg.time_boot_ms * 1e-3, position=(msg.x, msg.y, msg.z))
         elif kind == "ATTITUDE":
             with t.lock:
                 t.attitude_euler = (msg.roll, msg.pitch, msg.yaw)
                 t.attitude_history.append((msg.time_boot_ms * 1e-3, msg.roll, msg.pitch, msg.yaw))
+            t.notify(msg.time_boot_ms * 1e-3, attitude=(msg.roll, msg.pitch, msg.yaw))
         elif kind == "EXTENDED_SYS_STATE":
             with t.lock:
                 if msg.landed_state != mavlink.MAV_LANDED_STATE_UNDEFINED:

@@ -44,7 +44,7 @@ def _build_parser() -> argparse.ArgumentParser:
                     f"was told, how well it followed. `{PROG} replay RUN_DIR` re-runs a companion run's "
                     "perception with other settings.")
     p.add_argument("tlog", type=Path, help="the .tlog file")
-    p.add_argument("--out", type=Path, metavar="DIR",
+    p.add_argument("-o", "--out", type=Path, metavar="DIR",
                    help="write report.md, metrics.json and the plots here (default: summary only)")
     p.add_argument("--csv", action="store_true", help="also write DIR/csv/<MESSAGE>.csv per message type")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots (faster)")
@@ -88,20 +88,39 @@ def _replay(argv: list[str]) -> int:
     p.add_argument("--detector", choices=["parallax", "paper"], help="detector (default: the flight's)")
     p.add_argument("--differ-px", type=float, default=10.0, help="centroid distance that counts as a "
                    "different decision (default 10)")
-    p.add_argument("--out", type=Path, help="write the replay JSON here (default RUN_DIR/replay.json)")
+    p.add_argument("-o", "--out", type=Path, help="write the replay JSON here (default RUN_DIR/replay.json)")
+    p.add_argument("--rerun", nargs="?", const="", default=None, metavar="FILE",
+                   help="also record the replay for the Rerun viewer in FILE (default RUN_DIR/replay.rrd); "
+                        "needs the extra: pip install 'flowgap[viz]'")
+    p.add_argument("--rerun-connect", metavar="ADDRESS", help="stream that recording to a running viewer instead")
     args = p.parse_args(argv)
     if not args.run_dir.is_dir():
         print(f"{PROG}: error: {args.run_dir} is not a directory", file=sys.stderr)
         return 2
+    recording = None
+    if args.rerun is not None or args.rerun_connect:
+        from companion.recording import RecordingError, open_recording
+
+        try:
+            recording = open_recording(Path(args.rerun) if args.rerun else args.run_dir / "replay.rrd",
+                                       args.rerun_connect)
+        except RecordingError as exc:
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
+            return 2
     try:
-        result = replay(args.run_dir, args.flow, args.detector, args.differ_px)
+        result = replay(args.run_dir, args.flow, args.detector, args.differ_px, recording)
     except (ReplayError, KeyError, ValueError) as exc:
         print(f"{PROG}: error: replay: {exc}", file=sys.stderr)
         return 2
+    finally:
+        if recording is not None:
+            recording.close()
     out = args.out or args.run_dir / "replay.json"
     out.write_text(json.dumps(json_safe(result), indent=2) + "\n")
     print(describe(result))
     print(f"wrote {out}")
+    if recording is not None and not args.rerun_connect:
+        print(f"wrote {Path(args.rerun) if args.rerun else args.run_dir / 'replay.rrd'}")
     return 0
 
 
@@ -145,6 +164,10 @@ def main(argv: list[str] | None = None) -> int:
 
         try:
             written = write_outputs(rep, args.out, plots=not args.no_plots, csv_dir=args.csv, scene=args.scene)
+            from tools.tlog.storyboard import write_run_storyboard
+
+            board = write_run_storyboard(path, args.out)     # the tlog of a companion run: its storyboard too
+            written["storyboard"] = str(board) if board is not None else None
         except OSError as exc:
             print(f"{PROG}: error: cannot write to {args.out}: {exc.strerror or exc}", file=sys.stderr)
             return 2
@@ -158,6 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  analysed {n} packets in {elapsed:.2f} s")
         if written is not None:
             extra = f", {len(written.get('csv', []))} CSV files" if args.csv else ""
+            extra += ", storyboard.png" if written.get("storyboard") else ""
             print(f"  wrote {args.out}/report.md, metrics.json, {len(written['plots'])} plots{extra}")
     return 0 if rep.usable else 1
 

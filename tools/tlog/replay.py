@@ -4,7 +4,9 @@ The companion logs each frame's true pose (``frames.jsonl``) and each decision (
 Replay re-renders the camera at those poses, runs flow → derotation → detector → τ_c filter with the
 chosen backend and detector, and lists the steps where the used centroid differs from the one flown.
 The vehicle's motion is not re-simulated: the replay answers "what would this perception have seen on the
-same path", step by step.
+same path", step by step.  With a recording (``--rerun``) the replayed frames, flow and masks go into a Rerun
+recording beside what the flight's ``link.tlog`` holds: the estimated trajectory, the attitude and every
+setpoint sent.
 """
 
 from __future__ import annotations
@@ -31,8 +33,11 @@ def _read_jsonl(path: Path) -> list[dict]:
     return rows
 
 
-def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, differ_px: float = 10.0) -> dict:
-    """Replay ``run_dir``; ``flow``/``detector`` default to what the flight used."""
+def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, differ_px: float = 10.0,
+           recording=None) -> dict:
+    """Replay ``run_dir``; ``flow``/``detector`` default to what the flight used; ``recording``: a
+    :class:`companion.recording.FlightRecording` to log the replay into."""
+    from companion.flow.colour import flow_to_colour
     from companion.flow.registry import make_flow_backend, parse_backend
     from companion.gap import get_detector
     from companion.opening import OpeningTracker, candidates_in
@@ -52,9 +57,13 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     name, options = parse_backend(flow_spec)
     backend = make_flow_backend(name, **options)
     detect = get_detector(detector_name)
-    _, cloud = load_scene(summary["scene"])
+    spec, cloud = load_scene(summary["scene"])
     camera = PinholeCamera()
     openings = OpeningTracker()   # the image phase of the mission's tracking: its centroid_used
+    if recording is not None:
+        recording.scene(spec, cloud)
+        recording.camera(camera.K, camera.width, camera.height)
+        record_tlog(recording, run_dir / "link.tlog")
 
     def render(step):
         f = frames[step]
@@ -73,6 +82,11 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
         else:
             distance = math.dist(used, flown)
         differs = distance is not None and distance > differ_px
+        if recording is not None:
+            f = frames[step]
+            recording.frame(step, f["time_s"], rgb, flow_to_colour(p.flow), p.detection.mask, p.detection.centroid,
+                            used, f["position_true"], f["attitude_true"],
+                            text=f"step {step}: replayed {used}, flown {flown}")
         rows.append({"step": step, "flown_centroid": flown, "replay_centroid": used,
                      "replay_raw": p.detection.centroid, "distance_px": distance, "differs": differs})
         prev = rgb
@@ -80,6 +94,33 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
             "detector": summary["detector"]}, "replay": {"flow": flow_spec, "detector": detector_name},
             "differ_px": differ_px, "steps": len(rows), "differing_steps": [r["step"] for r in rows if r["differs"]],
             "rows": rows}
+
+
+def record_tlog(recording, tlog: Path) -> int:
+    """Log what a companion's ``link.tlog`` holds into ``recording``: the autopilot's LOCAL_POSITION_NED and
+    ATTITUDE on its own time stamps, and the SET_POSITION_TARGET_LOCAL_NED setpoints sent (at the latest
+    autopilot time before each).  Returns the number of messages used; a missing tlog logs nothing."""
+    from pymavlink import mavutil
+
+    if not tlog.exists():
+        return 0
+    conn = mavutil.mavlink_connection(str(tlog), notimestamps=False)
+    used = 0
+    try:
+        while True:
+            msg = conn.recv_match(type=["LOCAL_POSITION_NED", "ATTITUDE", "SET_POSITION_TARGET_LOCAL_NED"])
+            if msg is None:
+                return used
+            kind = msg.get_type()
+            if kind == "LOCAL_POSITION_NED":
+                recording.telemetry(msg.time_boot_ms * 1e-3, position=(msg.x, msg.y, msg.z))
+            elif kind == "ATTITUDE":
+                recording.telemetry(msg.time_boot_ms * 1e-3, attitude=(msg.roll, msg.pitch, msg.yaw))
+            elif math.isfinite(msg.x) and math.isfinite(msg.y) and math.isfinite(msg.z):
+                recording.setpoint((msg.x, msg.y, msg.z))
+            used += 1
+    finally:
+        conn.close()
 
 
 def describe(result: dict) -> str:

@@ -1,0 +1,73 @@
+"""The Rerun recording of a flight (companion.recording): what it holds, read back with the Rerun SDK, and the
+one-line error without the ``viz`` extra."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from companion.link.base import TelemetryCache
+from companion.recording import RecordingError, open_recording, recorded_entities, require_rerun
+from scenes.spec import SceneSpec
+
+
+def test_a_recording_holds_frames_trajectories_setpoints_and_time_series(tmp_path):
+    path = tmp_path / "flight.rrd"
+    recording = open_recording(path, truth=lambda: (0.0, (0.1, 0.0, -1.5), (1.0, 0.0, 0.0, 0.0)))
+    recording.scene(SceneSpec())
+    recording.camera(np.array([[200.0, 0, 160], [0, 200.0, 120], [0, 0, 1]]), 320, 240)
+    for i in range(100):                      # 2 s of 50 Hz telemetry: kept at 10 Hz
+        t = 1.0 + i * 0.02
+        recording.telemetry(t, position=(0.01 * i, 0.0, -1.5))
+        recording.telemetry(t, attitude=(0.0, 0.01, 0.0))
+    rgb = np.zeros((240, 320, 3), np.uint8)
+    mask = np.zeros((240, 320), bool)
+    mask[100:140, 140:180] = True
+    for step in range(3):
+        recording.frame(step, 1.0 + step, rgb, rgb, mask, (160.0, 120.0), (158.0, 121.0), (0.1 * step, 0, -1.5),
+                        (1.0, 0.0, 0.0, 0.0), (0.01, -0.02), 2.0 - 0.2 * step, f"step {step}")
+    for k in range(5):
+        recording.setpoint((0.1 * k, 0.0, -1.5))
+    recording.event("state: HOLD")
+    recording.close()
+
+    rows = recorded_entities(path)
+    assert rows["/camera/frame"] == rows["/camera/flow"] == rows["/camera/mask"] == 3
+    assert rows["/world/setpoints"] == 5
+    assert 19 <= rows["/world/trajectory/estimated"] <= 21
+    assert 19 <= rows["/plots/attitude/roll"] <= 21
+    assert rows["/world/trajectory/true"] == rows["/world/trajectory/estimated"] + 3  # + one per frame
+    assert rows["/plots/error/u"] == rows["/plots/wall_distance_m"] == 3
+    for static in ("/world/scene/wall/front", "/world/scene/wall/back", "/world/scene/floor",
+                   "/world/scene/background"):
+        assert rows[static] == 1
+    assert rows["/world/vehicle/camera"] == 2 + 3    # the mounting and the pinhole, then a frame per step
+
+
+def test_without_the_viz_extra_every_rerun_option_is_one_line_naming_it(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(sys.modules, "rerun", None)      # what `import rerun` does when it is not installed
+    with pytest.raises(RecordingError, match=r"flowgap\[viz\]"):
+        require_rerun()
+    from companion.__main__ import main as companion
+    from tools.launch import main as sitl
+    from tools.tlog import main as tlog
+
+    for run in (lambda: companion(["--rerun", "--run-dir", str(tmp_path / "c")]),
+                lambda: sitl(["--rerun", "--run-dir", str(tmp_path / "s")]),
+                lambda: tlog(["replay", str(tmp_path), "--rerun"])):
+        assert run() == 2
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and "flowgap[viz]" in err and "Traceback" not in err
+
+
+def test_a_failing_telemetry_listener_never_stops_the_others():
+    cache, seen = TelemetryCache(), []
+
+    def broken(time_s, **values):
+        raise RuntimeError("observer bug")
+
+    cache.listeners += [broken, lambda time_s, **values: seen.append((time_s, values))]
+    cache.notify(1.5, position=(1.0, 2.0, 3.0))
+    assert seen == [(1.5, {"position": (1.0, 2.0, 3.0)})]
