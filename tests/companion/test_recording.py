@@ -71,3 +71,51 @@ def test_a_failing_telemetry_listener_never_stops_the_others():
     cache.listeners += [broken, lambda time_s, **values: seen.append((time_s, values))]
     cache.notify(1.5, position=(1.0, 2.0, 3.0))
     assert seen == [(1.5, {"position": (1.0, 2.0, 3.0)})]
+
+
+def _free_tcp_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_rerun_connect_streams_the_recording_live_to_a_running_viewer(tmp_path):
+    """A headless viewer (``rerun --port P --save FILE``) receives what a connected recording logs."""
+    import shutil
+    import signal
+    import socket
+    import subprocess
+    import time
+    import warnings
+    from pathlib import Path
+
+    exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
+    if exe is None:
+        pytest.skip("the rerun viewer binary is not installed beside the SDK")
+    port, saved = _free_tcp_port(), tmp_path / "live.rrd"
+    viewer = subprocess.Popen([exe, "--port", str(port), "--save", str(saved)], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 20
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "the viewer never listened"
+                time.sleep(0.1)
+        recording = open_recording(connect=f"rerun+http://127.0.0.1:{port}/proxy")
+        for step in range(3):
+            recording.frame(step, float(step), np.zeros((24, 32, 3), np.uint8), None, None)
+        recording.setpoint((1.0, 2.0, -1.5))
+        recording.close()
+        time.sleep(1.0)
+    finally:
+        viewer.send_signal(signal.SIGINT)
+        viewer.wait(timeout=20)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")      # a streamed .rrd has no footer: read by a whole-file scan
+        rows = recorded_entities(saved)
+    assert rows["/camera/frame"] == 3 and rows["/world/setpoints"] == 1
