@@ -46,17 +46,23 @@ class DisBackend:
             raise ValueError(f"unknown DIS preset {preset!r}; choose from {sorted(DIS_PRESETS)}")
         self.preset = preset
         self.warm_start = warm_start
-        self._dis = cv2.DISOpticalFlow_create(DIS_PRESETS[preset])
         if finest_scale is None:
             finest_scale = _PRESET_OVERRIDES.get(preset, {}).get("finest_scale")
-        for value, setter in ((finest_scale, "setFinestScale"), (patch_size, "setPatchSize"),
-                              (patch_stride, "setPatchStride"),
-                              (gradient_descent_iterations, "setGradientDescentIterations"),
-                              (variational_refinement_iterations, "setVariationalRefinementIterations")):
-            if value is not None:
-                getattr(self._dis, setter)(int(value))
-        self._dis.setUseSpatialPropagation(True)
+        self._settings = ((finest_scale, "setFinestScale"), (patch_size, "setPatchSize"),
+                          (patch_stride, "setPatchStride"),
+                          (gradient_descent_iterations, "setGradientDescentIterations"),
+                          (variational_refinement_iterations, "setVariationalRefinementIterations"))
+        self._dis = self._make_dis()
+        self._initialised = False   # the last call was given an initial flow
         self._previous: np.ndarray | None = None
+
+    def _make_dis(self):
+        dis = cv2.DISOpticalFlow_create(DIS_PRESETS[self.preset])
+        for value, setter in self._settings:
+            if value is not None:
+                getattr(dis, setter)(int(value))
+        dis.setUseSpatialPropagation(True)
+        return dis
 
     def estimate(self, img1: np.ndarray, img2: np.ndarray, flow_init: np.ndarray | None = None) -> np.ndarray:
         h, w = check_pair(img1, img2)
@@ -64,7 +70,13 @@ class DisBackend:
         if init is not None and init.shape == (h, w, 2):
             # DIS uses a same-size CV_32FC2 flow argument as its initial flow (and overwrites it).
             flow = self._dis.calc(_grey(img1), _grey(img2), np.array(init, dtype=np.float32, order="C"))
+            self._initialised = True
         else:
+            if self._initialised:
+                # OpenCV's DIS keeps using an initial flow once given one, even when later called without
+                # (measured: a 23 px shift it cannot find from zero is found on every later call), so a call
+                # meant to start from zero gets a fresh one.
+                self._dis, self._initialised = self._make_dis(), False
             flow = self._dis.calc(_grey(img1), _grey(img2), None)
         flow = np.ascontiguousarray(flow, dtype=np.float32)
         if self.warm_start:

@@ -30,28 +30,32 @@ def make_mission(api_port, truth_port, run_dir):
 
 
 def _fly_once(vehicle_for_link, run_dir):
-    server, api, truth = vehicle_for_link(vehicle=VehicleConfig(), world=load_collision(SCENE), scene=SCENE, seed=0)
-    mission, link, camera = make_mission(api, truth, run_dir)
+    """One flight in lockstep (the vehicle's clock serves both sides), so that it is the same flight on any
+    machine at any load: no retry hides a loop that succeeds only sometimes."""
+    from companion.lockstep import open_clock
+
+    server, api, truth = vehicle_for_link(vehicle=VehicleConfig(), world=load_collision(SCENE), scene=SCENE, seed=0,
+                                          lockstep=True)
+    clock, poses = open_clock(f"udpin://127.0.0.1:{truth}", True)
+    link = make_link(f"udpin://127.0.0.1:{api}", tlog_path=run_dir / "link.tlog", clock=clock)
+    camera = SplatCamera(SCENE, poses, clock=clock)
+    mission = Mission(link, camera, make_flow_backend("dis", preset="fine"), get_detector("parallax"),
+                      RunLog(run_dir), config=MissionConfig(step_timeout_s=6.0))
     try:
         result = mission.run()
     finally:
         link.close()
+        clock.close()          # the vehicle's last simulated second, to settle before its verdict
         camera.close()
         mission.runlog.close()
-    time.sleep(0.5)
     server.stop()
     return result, server.verdict()
 
 
 def test_closed_loop_flight_through_a_suite_window(vehicle_for_link, tmp_path):
-    """One retry: the success rate is measured by flowgap-eval-flights over the suite, not here; a rare miss
-    must not fail CI, while a broken loop still fails both attempts."""
-    for attempt in range(2):
-        run_dir = tmp_path / f"attempt{attempt}"
-        result, verdict = _fly_once(vehicle_for_link, run_dir)
-        assert not (verdict["success"] and verdict["collision"])  # a touch is never a success
-        if verdict["success"]:
-            break
+    run_dir = tmp_path / "flight"
+    result, verdict = _fly_once(vehicle_for_link, run_dir)
+    assert not (verdict["success"] and verdict["collision"])  # a touch is never a success
     assert result.state is State.DONE, result.reason
     assert verdict["crossed_wall"] and not verdict["collision"], verdict
     assert verdict["success"] and result.servo_steps >= 3

@@ -59,8 +59,29 @@ def test_push_conditions(centroid, area, index, wall, push):
     assert servo_step(centroid, area, index, W, H, wall_distance_m=wall).push is push
 
 
-def test_heading_rotation():
-    assert heading_to_ned((1.0, 0.0, 0.2), math.pi / 2) == pytest.approx((0.0, 1.0, 0.2))
+@pytest.mark.parametrize("yaw_deg, forward_ned, right_ned", [
+    (0.0, (1.0, 0.0), (0.0, 1.0)),        # facing north, the right hand points east
+    (90.0, (0.0, 1.0), (-1.0, 0.0)),      # facing east, south
+    (180.0, (-1.0, 0.0), (0.0, -1.0)),    # facing south, west
+    (-90.0, (0.0, -1.0), (1.0, 0.0)),     # facing west, north
+])
+def test_heading_steps_turn_into_ned_by_the_compass(yaw_deg, forward_ned, right_ned):
+    yaw = math.radians(yaw_deg)
+    assert heading_to_ned((1.0, 0.0, 0.2), yaw) == pytest.approx((*forward_ned, 0.2), abs=1e-12)
+    assert heading_to_ned((0.0, 1.0, -0.1), yaw) == pytest.approx((*right_ned, -0.1), abs=1e-12)
+
+
+def test_a_heading_step_at_any_yaw_keeps_its_length_and_puts_right_90_degrees_clockwise_of_forward():
+    for yaw in np.linspace(-math.pi, math.pi, 13):
+        f, r = 0.3, -0.2
+        n, e, d = heading_to_ned((f, r, 0.05), yaw)
+        assert math.hypot(n, e) == pytest.approx(math.hypot(f, r)) and d == 0.05
+        # the forward and right parts, each on its own, seen as compass bearings (clockwise from north)
+        fn, fe, _ = heading_to_ned((1.0, 0.0, 0.0), yaw)
+        rn, re, _ = heading_to_ned((0.0, 1.0, 0.0), yaw)
+        assert math.remainder(math.atan2(fe, fn) - yaw, math.tau) == pytest.approx(0.0, abs=1e-12)
+        assert math.remainder(math.atan2(re, rn) - (yaw + math.pi / 2), math.tau) == pytest.approx(0.0, abs=1e-12)
+        assert (n, e) == pytest.approx((f * fn + r * rn, f * fe + r * re))
 
 
 def test_push_waypoints_are_005_m_increments_with_the_bias_spread_over_the_first_half():

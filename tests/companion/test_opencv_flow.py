@@ -25,12 +25,22 @@ def test_known_shift_epe(name, options, bound):
 
 
 def test_dis_warm_start_uses_previous_flow():
-    img1, img2 = textured_pair(120, 160, SHIFT)
-    backend = make_flow_backend("dis", preset="ultrafast", warm_start=True)
-    backend.estimate(img1, img2)
-    second = backend.estimate(img1, img2)
-    epe = np.hypot(second[..., 0] - SHIFT[0], second[..., 1] - SHIFT[1])[8:-8, 8:-8]
-    assert epe.mean() < 0.4
+    """A 23 px shift is beyond DIS ultrafast's reach from zero; started from the previous call's flow (here one
+    refined from the exact shift) it is found.  Without warm start each call starts from zero again, even after
+    a call given an initial flow (OpenCV's DIS would otherwise keep using it)."""
+    shift = (20.0, -12.0)
+    img1, img2 = textured_pair(120, 160, shift)
+    exact = np.broadcast_to(np.float32(shift), (120, 160, 2)).copy()
+
+    def epe(flow):
+        return float(np.hypot(flow[..., 0] - shift[0], flow[..., 1] - shift[1])[30:-30, 30:-30].mean())
+
+    for warm, bound_ok in ((True, lambda e: e < 0.5), (False, lambda e: e > 5.0)):
+        backend = make_flow_backend("dis", preset="ultrafast", warm_start=warm)
+        assert epe(backend.estimate(img1, img2, flow_init=exact)) < 0.5
+        assert bound_ok(epe(backend.estimate(img1, img2))), f"warm_start={warm}"
+    backend.reset()
+    assert epe(make_flow_backend("dis", preset="ultrafast").estimate(img1, img2)) > 5.0   # cold: lost
 
 
 def test_registry_rejects_unknown_and_bad_inputs():

@@ -278,3 +278,44 @@ def test_parameter_store_checks_names_and_ranges():
         with pytest.raises(ParameterError):
             params.set(name, value)
     assert params["MIS_TAKEOFF_ALT"] == 1.5
+
+
+@pytest.mark.parametrize("velocity", [(2.0, 0.0, 0.0), (-2.0, 0.0, 0.0), (0.0, 1.5, 0.0), (0.0, -1.5, 0.0),
+                                      (0.0, 0.0, -1.2), (0.0, 0.0, 0.8), (1.2, -0.8, -0.5)])
+def test_hold_stops_ahead_in_every_direction_flown(commander, velocity):
+    """Braking at 2 m/s² from v covers v²/(2·2) m along v on each axis: ahead of the vehicle, flying north,
+    south, east, west, climbing, descending or diagonally, never behind it."""
+    here = (3.0, -1.0, -2.0)
+    commander.arm(status())
+    flying = VehicleStatus(time_s=1.0, position=here, velocity=velocity, yaw=0.0, armed=True, landed=False)
+    commander.set_mode(FlightMode.AUTO_LOITER, flying)
+    stop = commander.update(flying).setpoint.position
+    for p, v, s in zip(here, velocity, stop, strict=True):
+        expected = p + math.copysign(v ** 2 / 4.0, v)
+        assert s == pytest.approx(expected)
+        assert (s - p) * v >= 0.0                     # ahead along the motion, or where it is
+
+
+def test_offboard_loss_on_the_ground_holds_instead_of_returning(commander):
+    """PX4 has nothing to return from on the ground: a Return failsafe there becomes Hold."""
+    commander.params.set("COM_OBL_RC_ACT", 3.0)                         # Return
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, 0.0)), 0.5)
+    commander.set_mode(FlightMode.OFFBOARD, at(0.5, 0.0, 0.0, 0.0, landed=True))
+    out = commander.update(at(2.0, 0.0, 0.0, 0.0, landed=True))         # setpoints stopped: offboard lost
+    assert commander.failsafe and out.mode is FlightMode.AUTO_LOITER
+    assert commander.messages[-1][1] == "Failsafe: offboard lost, switching to Hold"
+
+
+def test_a_delayed_return_failsafe_that_falls_due_on_the_ground_holds(commander):
+    """Data link lost in the air (Return after COM_FAIL_ACT_T); landed by the deadline: Hold, not Return."""
+    commander.params.set("NAV_DLL_ACT", 2.0)                            # Return
+    commander.params.set("COM_DISARM_LAND", -1.0)                       # stay armed on the ground
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.gcs_heartbeat(0.0)
+    commander.set_mode(FlightMode.AUTO_LOITER, at(0.0, 0.0, 0.0, -2.0))
+    assert commander.update(at(10.5, 0.0, 0.0, -2.0)).mode is FlightMode.AUTO_LOITER   # Return in 5 s
+    commander.update(at(12.0, 0.0, 0.0, 0.0, landed=True))              # set down meanwhile
+    out = commander.update(at(15.6, 0.0, 0.0, 0.0, landed=True))        # the deadline, on the ground
+    assert out.mode is FlightMode.AUTO_LOITER and commander.armed
+    assert not any(text == "Failsafe: switching to Return" for _, text in commander.messages)
