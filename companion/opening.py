@@ -48,6 +48,8 @@ class OpeningConfig:
                                     # whole opening in view: judged from 2.2 m, partial masks refused a 0.75 m one)
     min_opening_px: float = 6.0     # two openings seen together count only when each is this wide a circle
     min_gate_px: float = 20.0       # ... and their half separation gates no tighter than this
+    lost_after: int = 4             # frames in a row with openings in view but none matched to the tracked one:
+                                    # then one placed where the tracked one is on the wall is taken for it
     mask_inset_px: float = 2.5      # the parallax mask's clear circle lies this far inside that of what is seen
                                     # through the opening (measured with dis:fine: 1-2 px on suite views, 1.5 px
                                     # more on hard-world views, see clear_radius_m)
@@ -98,6 +100,7 @@ class OpeningTracker:
         self.switched = False
         self._announced = False
         self.separation_px = math.inf       # the closest two openings have been to each other in one frame
+        self._unmatched = 0                 # frames in a row with openings in view, none matched to the tracked one
 
     @property
     def last_accepted(self) -> bool:
@@ -113,17 +116,25 @@ class OpeningTracker:
 
     def observe(self, candidates: list[Candidate], across_m: Point, wall_distance_m: float | None,
                 focal_px: float, width: int, height: int, axis_px: Point | None = None,
-                moved_m: float = math.inf, wall_yaw_rad: float | None = None) -> Sight:
-        """One frame: ``candidates`` seen in it, the vehicle's place across the heading (right, down, metres),
-        the wall's measured distance (None until there is one), where the heading's axis is in the (tilted)
-        frame, for the clearance the body would have flying straight on, and how far the vehicle moved between
-        the two frames (a small step gives little parallax and a poor mask, not one to judge by); and how far
+                moved_m: float = math.inf, wall_yaw_rad: float | None = None,
+                viewer_m: Point | None = None) -> Sight:
+        """One frame pair: ``candidates`` seen in it, and where that view was taken from: the place across the
+        heading (right, down, metres) and the wall's distance (None until measured) of the frame whose pixels
+        the detection lives in (forward flow's: the first of the two), and where the heading's axis is in that
+        (tilted) frame; ``viewer_m``, the vehicle's place now (default: the same), for the offset to steer by and
+        the clearance the body would have flying straight on from here; how far the vehicle moved between the
+        two frames (a small step gives little parallax and a poor mask, not one to judge by); and how far
         the wall is turned against the camera's axis, when measured (an opening seen at an angle looks narrower
         than it is in the wall, where the body crosses it)."""
+        viewer = across_m if viewer_m is None else viewer_m
         stretch = 1.0 / math.cos(wall_yaw_rad) if wall_yaw_rad is not None and abs(wall_yaw_rad) > 0.05 else 1.0
 
         def radius_px(det) -> float:
             return det.clear_radius_px if stretch == 1.0 else in_wall(det.mask, stretch)[1]
+
+        def place(target_px: Point) -> Point:
+            off = metric_offset(normalised_error(target_px, width, height), width, height, focal_px, wall_distance_m)
+            return across_m[0] + off[0], across_m[1] + off[1]
         note = None
         if self.pixels.used is None and len(candidates) > 1 and not self._announced:
             best = max(candidates, key=lambda c: c.detection.clear_radius_px)
@@ -141,6 +152,20 @@ class OpeningTracker:
         before = self.pixels.used
         pick = _nearest(candidates, before, gate, lambda c: c.target_px)
         widest = max(candidates, key=lambda c: c.detection.clear_radius_px) if candidates else None
+        self._unmatched = self._unmatched + 1 if pick is None and widest is not None and before is not None else 0
+        if self._unmatched >= self.config.lost_after and wall_distance_m is not None and self.world.used is not None:
+            # Measured: fragments of one opening, taken for two, shrank the image gate so that the tracked one
+            # was never matched again, and the vehicle probed in front of it until its step budget ran out.  The
+            # world place still says which one it is: a sighting placed within the world gate of it is it.
+            near = [c for c in candidates if math.dist(place(c.target_px), self.world.used) <= self.config.world_gate_m]
+            if near:
+                pick = min(near, key=lambda c: math.dist(place(c.target_px), self.world.used))
+                self.pixels.config = dataclasses.replace(self.pixels.config, tau_c_px=self.config.tau_c_px)
+                self.pixels.seed(pick.target_px)
+                self.separation_px, self._unmatched = math.inf, 0
+                before = pick.target_px
+                note = (f"the tracked opening, unmatched in the image for {self.config.lost_after} frames, found "
+                        f"again where it is on the wall, at ({pick.target_px[0]:.0f}, {pick.target_px[1]:.0f}) px")
         # Not the tracked one: offer the widest to the image tracker, which takes it only once two frames in a
         # row agree on it (three with several openings about: the tracked one is gone, say out of view); then
         # it is the one, from scratch.
@@ -158,10 +183,6 @@ class OpeningTracker:
                     f"seen in {self.pixels.reacquire_after} frames in a row")
         if wall_distance_m is None or used is None:
             return Sight(pick.detection if pick is not None else None, used, note=note)
-
-        def place(target_px: Point) -> Point:
-            off = metric_offset(normalised_error(target_px, width, height), width, height, focal_px, wall_distance_m)
-            return across_m[0] + off[0], across_m[1] + off[1]
 
         if self.world.used is None:          # the image-tracked centre, placed in the world once
             self.world.seed(place(used))
@@ -198,14 +219,17 @@ class OpeningTracker:
                 self.radii, self.close_radii, self.places = [r], [r], [p]
                 self.switched = True
                 target, radius, chosen = p, r, (c, p)
-                note = f"{too_small}; taking the one {math.dist(p, across_m):.2f} m away, {2 * r:.2f} m clear"
+                note = f"{too_small}; taking the one {math.dist(p, viewer):.2f} m away, {2 * r:.2f} m clear"
             else:
                 refusal = f"{too_small}: not flying through"
-        offset = (target[0] - across_m[0], target[1] - across_m[1])
+        offset = (target[0] - viewer[0], target[1] - viewer[1])
         here = None
         if chosen is not None and axis_px is not None and self.world.last_accepted:
+            # the heading's axis from where the vehicle is now, as that view saw the wall
+            shift = focal_px / wall_distance_m
+            axis = (axis_px[0] + (viewer[0] - across_m[0]) * shift, axis_px[1] + (viewer[1] - across_m[1]) * shift)
             mask = chosen[0].detection.mask if stretch == 1.0 else in_wall(chosen[0].detection.mask, stretch)[0]
-            here = self.clear_radius_m(edge_distance_px(mask, (axis_px[0] * stretch, axis_px[1])), wall_distance_m,
+            here = self.clear_radius_m(edge_distance_px(mask, (axis[0] * stretch, axis[1])), wall_distance_m,
                                        focal_px) if chosen[0].detection.mask.any() else 0.0
         return Sight(chosen[0].detection if chosen is not None else None, used, offset, radius, here,
                      len(self.places), note, refusal)

@@ -101,3 +101,51 @@ def test_openings_seen_together_are_not_confused_later_when_only_one_of_them_is_
     sights = [tracker.observe([cand(left)], (0.0, 0.0), None, F, W, H) for _ in range(3)]
     assert [s.detection is left for s in sights] == [False, False, True]
     assert "lost the tracked opening" in sights[2].note
+
+
+def test_a_view_is_placed_from_where_it_was_taken_and_steered_from_where_the_vehicle_is():
+    """Forward flow's mask lives in the first frame of the pair: the opening is placed from that frame's place
+    and distance, while the offset to steer by, and the room flying straight on, are from the vehicle's place
+    now (here 0.2 m to the right of the view, nearer by nothing: a sideways step)."""
+    tracker = OpeningTracker()
+    centred = rect(120, 80, 200, 160)                   # an 81 px opening centred at (160, 120)
+    for _ in range(2):
+        tracker.observe([cand(centred)], (0.0, 0.0), None, F, W, H)
+    seen = tracker.observe([cand(centred)], (0.0, 0.0), 1.5, F, W, H, axis_px=(W / 2, H / 2), viewer_m=(0.2, 0.0))
+    place_u = (centred.clear_centre[0] - W / 2) * 1.5 / F          # where the view put it across the heading
+    assert seen.offset_m[0] == pytest.approx(place_u - 0.2, abs=1e-6)
+    # the axis from 0.2 m right meets the wall 0.2·f/1.5 px right of the view's centre: less room on that side
+    room_px = centred.clear_radius_px - 0.2 * F / 1.5
+    assert seen.clearance_here_m == pytest.approx(tracker.clear_radius_m(room_px, 1.5, F), abs=0.01)
+    straight = OpeningTracker()
+    for _ in range(2):
+        straight.observe([cand(centred)], (0.0, 0.0), None, F, W, H)
+    same = straight.observe([cand(centred)], (0.0, 0.0), 1.5, F, W, H, axis_px=(W / 2, H / 2))
+    assert same.clearance_here_m > seen.clearance_here_m + 0.15
+
+
+def test_a_tracked_opening_unmatched_in_the_image_is_found_again_where_it_is_on_the_wall():
+    """Two fragments of one opening, taken for two openings 30 px apart, shrink the image gate to 20 px; the
+    opening then seen 30-50 px away, jittering by 25 px from frame to frame, is neither matched to the track
+    nor confirmed as a new one.  From 1 m it lies within the world gate of the tracked place, so after four
+    such frames it is taken for the tracked opening again, and said so; one placed far from it never is."""
+    def tracked():
+        tracker = OpeningTracker()
+        left, right = rect(140, 100, 160, 130), rect(170, 100, 190, 130)
+        for _ in range(2):
+            tracker.observe([cand(left), cand(right)], (0.0, 0.0), None, F, W, H)
+        tracker.observe([cand(left), cand(right)], (0.0, 0.0), 1.0, F, W, H)     # placed on the wall
+        assert tracker.separation_px == pytest.approx(30.0, abs=1.0)
+        return tracker
+
+    tracker = tracked()
+    seen = [rect(140 + du, 110, 200 + du, 170) for du in (0, 25, 0, 25)]
+    sights = [tracker.observe([cand(d)], (0.0, 0.0), 1.0, F, W, H) for d in seen]
+    assert all(s.detection is None for s in sights[:3])
+    assert sights[3].detection is seen[3] and "found again where it is on the wall" in sights[3].note
+    assert sights[3].target_px == pytest.approx(seen[3].clear_centre)
+    # an opening 0.9 m away on the wall (140 px at 1 m) is another one, however long the tracked one is unseen
+    other = tracked()
+    far = [rect(250 + du, 100, 300 + du, 150) for du in (0, 25, 0, 25, 0, 25)]
+    assert all(other.observe([cand(d)], (0.0, 0.0), 1.0, F, W, H).detection is None for d in far)
+
