@@ -1,0 +1,118 @@
+"""The mission's ways out, against a scripted autopilot: a refused command or a timeout ends in FAILED with the
+reason, and the vehicle is asked to hold whenever it may be in the air (never on the ground before takeoff)."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+from companion.camera import Frame
+from companion.link.base import AutopilotLink, LinkError
+from companion.mission import Mission, MissionConfig, State
+from companion.runlog import RunLog
+
+
+class ScriptedLink(AutopilotLink):
+    """An autopilot that answers at once: armed on request, at any setpoint the moment it is sent."""
+
+    name = "scripted"
+
+    def __init__(self, refuse: dict[str, str] | None = None, disarm_on_setpoint: bool = False,
+                 climbs: bool = True):
+        super().__init__()
+        self.refuse, self.disarm_on_setpoint, self.climbs = refuse or {}, disarm_on_setpoint, climbs
+        self.calls: list[str] = []
+        t = self.telemetry
+        t.position, t.landed, t.velocity = (0.0, 0.0, 0.0), True, (0.0, 0.0, 0.0)
+
+    def alive(self) -> bool:
+        return True
+
+    def _do(self, what: str) -> None:
+        self.calls.append(what)
+        if what in self.refuse:
+            raise LinkError(self.refuse[what])
+
+    def connect(self, timeout_s: float = 30.0) -> None:
+        self._do("connect")
+
+    def close(self) -> None:
+        self.calls.append("close")
+
+    def arm(self) -> None:
+        self._do("arm")
+        self.telemetry.armed = True
+
+    def takeoff(self, altitude_m: float) -> None:
+        self._do("takeoff")
+        if self.climbs:          # up a moment later, as the mission reads home first
+            def climbed():
+                self.telemetry.position, self.telemetry.landed = (0.0, 0.0, -altitude_m), False
+
+            threading.Timer(0.05, climbed).start()
+
+    def start_offboard(self, position, yaw) -> None:
+        self._do("offboard")
+
+    def set_position_target(self, position, yaw) -> None:
+        self._do("setpoint")
+        self.telemetry.position = tuple(position)
+        if self.disarm_on_setpoint:
+            self.telemetry.armed = False
+
+    def hold(self) -> None:
+        self._do("hold")
+
+    def land(self) -> None:
+        self._do("land")
+
+
+class StillCamera:
+    width, height = 64, 48
+    K = np.array([[40.0, 0, 32], [0, 40.0, 24], [0, 0, 1]])
+
+    def capture(self) -> Frame:
+        return Frame(np.zeros((48, 64, 3), np.uint8), (0.0, 0.0, -1.5), (1.0, 0.0, 0.0, 0.0), 0.0, 0.0)
+
+    def close(self) -> None:
+        pass
+
+
+def _fly(tmp_path, link: ScriptedLink) -> Mission:
+    def never(*_):
+        raise AssertionError("no frame pair should be perceived")
+
+    mission = Mission(link, StillCamera(), never, never, RunLog(tmp_path, images=False),
+                      config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3))
+    mission.run()
+    mission.runlog.close()
+    return mission
+
+
+def test_a_refused_arm_fails_with_the_autopilots_reason_and_commands_nothing_more(tmp_path):
+    link = ScriptedLink(refuse={"arm": "arming denied: Preflight Fail: ekf2 missing data"})
+    result = _fly(tmp_path, link).result
+    assert result.state is State.FAILED and result.reason == "arm: arming denied: Preflight Fail: ekf2 missing data"
+    assert link.calls == ["connect", "arm"]                  # on the ground: nothing to hold
+
+
+def test_a_takeoff_that_never_reaches_its_altitude_fails_and_holds(tmp_path):
+    link = ScriptedLink(climbs=False)
+    result = _fly(tmp_path, link).result
+    assert result.state is State.FAILED and result.reason.startswith("takeoff: timed out after 0 s waiting for")
+    assert link.calls[-1] == "hold" and [s for _, s in result.states][-2:] == ["takeoff", "failed"]
+
+
+def test_a_vehicle_that_disarms_in_the_servo_phase_fails_there_and_is_asked_to_hold(tmp_path):
+    link = ScriptedLink(disarm_on_setpoint=True)
+    result = _fly(tmp_path, link).result
+    assert result.state is State.FAILED
+    assert result.reason == "servo: the vehicle disarmed during the servo phase (crash or failsafe)"
+    assert link.calls[-1] == "hold" and "setpoint" in link.calls
+
+
+def test_a_refused_hold_after_a_failure_is_logged_not_raised(tmp_path):
+    link = ScriptedLink(climbs=False, refuse={"hold": "command denied"})
+    result = _fly(tmp_path, link).result
+    assert result.state is State.FAILED and link.calls[-1] == "hold"
