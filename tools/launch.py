@@ -155,7 +155,9 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         verdict["storyboard"] = str(board)
     if rerun and not rerun_connect and (run_dir / "flight.rrd").exists():
         verdict["rerun"] = str(run_dir / "flight.rrd")
-    if not vehicle_verdict:
+    if interrupted:
+        verdict["error"] = "interrupted (Ctrl-C): both processes were stopped"
+    elif not vehicle_verdict:
         verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
     (run_dir / "verdict.json").write_text(json.dumps(verdict, indent=2) + "\n")
     return verdict

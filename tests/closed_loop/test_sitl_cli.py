@@ -1,0 +1,45 @@
+"""``flowgap-sitl`` as a user runs it (the `make demo` path): a process that writes its verdict, exits with the
+flight's status, and stops both of its processes on Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tools.eval_flights import InstancePool, _ports_free
+
+
+@pytest.mark.slow
+def test_ctrl_c_mid_flight_stops_both_processes_and_leaves_a_verdict(tmp_path):
+    pool = InstancePool()
+    instance = pool.acquire()
+    run_dir, result = tmp_path / "flight", tmp_path / "verdict-copy.json"
+    try:
+        sitl = subprocess.Popen([sys.executable, "-m", "tools.launch", "--scene", "window1_brick", "--lockstep",
+                                 "--quiet", "--run-dir", str(run_dir), "--instance", str(instance),
+                                 "--result", str(result)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True)
+        frames = run_dir / "companion" / "frames.jsonl"
+        deadline = time.monotonic() + 60
+        while not (frames.exists() and len(frames.read_text().splitlines()) >= 3):   # servoing
+            assert sitl.poll() is None and time.monotonic() < deadline, "the flight never got to its third frame"
+            time.sleep(0.1)
+        sitl.send_signal(signal.SIGINT)
+        out, _ = sitl.communicate(timeout=60)
+        assert sitl.returncode == 1
+        verdict = json.loads((run_dir / "verdict.json").read_text())
+        assert verdict["success"] is False and verdict["error"].startswith("interrupted")
+        assert json.loads(result.read_text()) == verdict and '"success": false' in out
+        deadline = time.monotonic() + 10                  # both processes gone: their ports are free again
+        while not _ports_free(instance):
+            assert time.monotonic() < deadline, "a process of the flight still holds its ports"
+            time.sleep(0.2)
+    finally:
+        if sitl.poll() is None:
+            sitl.kill()
+        pool.release(instance)
