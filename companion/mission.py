@@ -214,8 +214,8 @@ class Mission:
             moved = math.dist(prev_position, position)
             # Only with a detected gap: its mask (every opening's) keeps the far pixels out of the wall's depth
             # statistic (measured: without one, readings of 0.7–0.9 m for a wall 2.8 m away pushed far too early).
-            measured = (wall_distance_from_flow(flow, np.logical_or.reduce([d.mask for d in found]), moved)
-                        if found else None)
+            gaps = np.logical_or.reduce([d.mask for d in found]) if found else None
+            measured = wall_distance_from_flow(flow, gaps, moved) if found else None
             if measured is not None and not 0.3 <= measured <= 10.0:
                 measured = None
             here = self._forward(position)
@@ -235,7 +235,7 @@ class Mission:
             seen_from = self._forward(prev_position)
             seen_distance = wall_distance + (here - seen_from) if wall_distance is not None else None
             if found and moved >= 0.08:
-                turned = wall_yaw_from_flow(flow, np.logical_or.reduce([d.mask for d in found]), focal)
+                turned = wall_yaw_from_flow(flow, gaps, focal)
                 if turned is not None:
                     yaw_estimates.append(turned)
             wall_yaw = float(np.median(yaw_estimates[-5:])) if len(yaw_estimates) >= 3 else None

@@ -129,8 +129,18 @@ class OpeningTracker:
         viewer = across_m if viewer_m is None else viewer_m
         stretch = 1.0 / math.cos(wall_yaw_rad) if wall_yaw_rad is not None and abs(wall_yaw_rad) > 0.05 else 1.0
 
+        walled: dict[int, tuple[np.ndarray, float]] = {}
+
+        def wall_view(det) -> tuple[np.ndarray, float]:
+            """The detection's mask and clear radius (px) as the wall's own plane shows them (once each)."""
+            if stretch == 1.0:
+                return det.mask, det.clear_radius_px
+            if id(det) not in walled:
+                walled[id(det)] = in_wall(det.mask, stretch)
+            return walled[id(det)]
+
         def radius_px(det) -> float:
-            return det.clear_radius_px if stretch == 1.0 else in_wall(det.mask, stretch)[1]
+            return wall_view(det)[1]
 
         def place(target_px: Point) -> Point:
             off = metric_offset(normalised_error(target_px, width, height), width, height, focal_px, wall_distance_m)
@@ -228,7 +238,7 @@ class OpeningTracker:
             # the heading's axis from where the vehicle is now, as that view saw the wall
             shift = focal_px / wall_distance_m
             axis = (axis_px[0] + (viewer[0] - across_m[0]) * shift, axis_px[1] + (viewer[1] - across_m[1]) * shift)
-            mask = chosen[0].detection.mask if stretch == 1.0 else in_wall(chosen[0].detection.mask, stretch)[0]
+            mask = wall_view(chosen[0].detection)[0]
             here = self.clear_radius_m(edge_distance_px(mask, (axis[0] * stretch, axis[1])), wall_distance_m,
                                        focal_px) if chosen[0].detection.mask.any() else 0.0
         return Sight(chosen[0].detection if chosen is not None else None, used, offset, radius, here,

@@ -82,6 +82,18 @@ def random_opening(rng: np.random.Generator) -> OpeningSpec:
 WORLDS = ("standard", "hard")
 
 
+def _random_wall(rng: np.random.Generator, textures: Sequence[str]) -> tuple[WallSpec, int]:
+    """The wall both worlds draw (its texture, the scene's seed, distance, size, thickness, place, scale), in the
+    order the standard world always drew them."""
+    texture = str(rng.choice(list(textures)))
+    seed = int(rng.integers(0, 2**31 - 1))
+    distance = float(rng.uniform(2.5, 4.0))
+    wall = WallSpec(distance=distance, width=float(rng.uniform(6.5, 8.0)), height=4.0,
+                    thickness=float(rng.uniform(0.1, 0.25)), center_y=float(rng.uniform(-0.5, 0.5)),
+                    texture=texture, seed=seed, texture_scale=float(rng.uniform(0.8, 1.25)))
+    return wall, seed
+
+
 def random_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES, world: str = "standard") -> SceneSpec:
     """A random wall-with-opening scene for training and Monte-Carlo flights (all draws from ``rng``).
 
@@ -93,15 +105,10 @@ def random_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES, w
         return hard_scene(rng, textures)
     if world != "standard":
         raise ValueError(f"unknown world {world!r}; choose one of {WORLDS}")
-    texture = str(rng.choice(list(textures)))
-    seed = int(rng.integers(0, 2**31 - 1))
-    distance = float(rng.uniform(2.5, 4.0))
-    wall = WallSpec(distance=distance, width=float(rng.uniform(6.5, 8.0)), height=4.0,
-                    thickness=float(rng.uniform(0.1, 0.25)), center_y=float(rng.uniform(-0.5, 0.5)),
-                    texture=texture, seed=seed, texture_scale=float(rng.uniform(0.8, 1.25)))
+    wall, seed = _random_wall(rng, textures)
     gap = float(rng.uniform(1.0, 4.0))
     matched = rng.random() < 0.7
-    bg_scale = wall.texture_scale * ((distance + wall.thickness + gap) / distance if matched
+    bg_scale = wall.texture_scale * ((wall.distance + wall.thickness + gap) / wall.distance if matched
                                      else float(rng.uniform(0.8, 2.0)))
     bg = BackgroundSpec(gap=gap, width=wall.width + 1.0, height=4.5, seed=seed + 1, texture_scale=bg_scale)
     jitter = JitterSpec(exposure=float(rng.uniform(0.8, 1.2)),
@@ -120,12 +127,7 @@ HARD_SPACING_M = 0.4                # of wall between two openings' bounding box
 def hard_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES) -> SceneSpec:
     """A hard-world scene: 1–3 openings 0.3–1.3 m wide or high (some impassable), the wall turned up to ±20°
     against the start heading (``start_yaw_deg``), the background 0.6–4 m behind it.  All draws from ``rng``."""
-    texture = str(rng.choice(list(textures)))
-    seed = int(rng.integers(0, 2**31 - 1))
-    distance = float(rng.uniform(2.5, 4.0))
-    wall = WallSpec(distance=distance, width=float(rng.uniform(6.5, 8.0)), height=4.0,
-                    thickness=float(rng.uniform(0.1, 0.25)), center_y=float(rng.uniform(-0.5, 0.5)),
-                    texture=texture, seed=seed, texture_scale=float(rng.uniform(0.8, 1.25)))
+    wall, seed = _random_wall(rng, textures)
     wanted = int(rng.integers(HARD_OPENINGS[0], HARD_OPENINGS[1] + 1))
     openings: list[OpeningSpec] = []
     boxes: list[tuple[float, float, float, float]] = []
@@ -143,7 +145,7 @@ def hard_scene(rng: np.random.Generator, textures: Sequence[str] = TEXTURES) -> 
             openings.append(op)
             boxes.append(box)
     gap = float(rng.uniform(*HARD_BACKGROUND_GAP))
-    bg_scale = wall.texture_scale * (distance + wall.thickness + gap) / distance
+    bg_scale = wall.texture_scale * (wall.distance + wall.thickness + gap) / wall.distance
     bg = BackgroundSpec(gap=gap, width=wall.width + 1.0, height=4.5, seed=seed + 1, texture_scale=bg_scale)
     jitter = JitterSpec(exposure=float(rng.uniform(0.8, 1.2)),
                         tint=tuple(float(v) for v in rng.uniform(0.92, 1.08, 3)))
