@@ -126,7 +126,10 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, settings: Inf
               "mirror_average": settings.mirror_average, "refine_scale": settings.refine_scale,
               "refine_iters": settings.refine_iters if two_pass else 0,
               "refine_min_scale": settings.refine_min_scale if two_pass else 0.0,
-              "refine_max_flow": settings.refine_max_flow if two_pass else 0.0, "precision": precision,
+              "refine_max_flow": settings.refine_max_flow if two_pass else 0.0,
+              "variational_levels": settings.variational_levels,
+              "variational_iters": settings.variational_iters if settings.variational_levels else 0,
+              "precision": precision,
               "epe": raft_sum / count if count else float("nan")}
     for preset, (_, total) in dis.items():
         result[f"dis_{preset}_epe"] = total / count if count else float("nan")
@@ -139,6 +142,7 @@ def inference_overrides(args: argparse.Namespace) -> dict:
     return {"iters": args.val_iters, "input_scale": args.input_scale, "mirror_average": args.mirror_average,
             "refine_scale": args.refine_scale, "refine_iters": args.refine_iters,
             "refine_min_scale": args.refine_min_scale, "refine_max_flow": args.refine_max_flow,
+            "variational_levels": args.variational_levels, "variational_iters": args.variational_iters,
             "precision": args.eval_precision}
 
 
@@ -555,6 +559,12 @@ def build_parser() -> argparse.ArgumentParser:
                                       "--refine-scale)")
     v.add_argument("--refine-iters", dest="refine_iters", type=int, default=None, metavar="N",
                    help="RAFT iterations of the refinement pass")
+    v.add_argument("--variational-levels", dest="variational_levels", type=int, default=None, metavar="N",
+                   help="then refine the flow variationally on N scales, coarse to fine (raft "
+                        "variational_levels; 0: RAFT's flow as it is)")
+    v.add_argument("--variational-iters", dest="variational_iters", type=int, default=None, metavar="N",
+                   help="fixed-point iterations of the variational refinement on each scale (raft "
+                        "variational_iters)")
     v.add_argument("--eval-precision", dest="eval_precision", choices=PRECISIONS, default=None,
                    help="the network's precision when validating, as the raft backend's precision (auto: bf16 "
                         "on a CPU with AVX512-BF16 or AMX, else fp32; default: the weights' own with "
@@ -613,6 +623,10 @@ def _check(args: argparse.Namespace) -> None:
     if args.refine_iters is not None and args.refine_iters < 1:
         raise CliError(f"--refine-iters must be at least 1 (got {args.refine_iters}); use --refine-scale 0 "
                        "for one pass")
+    if args.variational_levels is not None and not 0 <= args.variational_levels <= 4:
+        raise CliError(f"--variational-levels must be 0 (off) to 4 (got {args.variational_levels})")
+    if args.variational_iters is not None and args.variational_iters < 1:
+        raise CliError(f"--variational-iters must be at least 1 (got {args.variational_iters})")
     if not 0.0 <= args.crop_focus <= 1.0:
         raise CliError(f"--crop-focus must be a probability in [0, 1] (got {args.crop_focus})")
     if args.crop_focus > 0 and crop is None and not args.eval_only:

@@ -12,6 +12,7 @@ from companion.flow.raft.backend import RAFT_DEFAULTS, InferenceSettings
 from companion.flow.raft.corr import CorrBlock
 from companion.flow.raft.upsample import convex_upsample, upflow8
 from companion.flow.raft.weights import clear_cache, load_raft_state_dict, save_flowgap_weights
+from companion.flow.registry import parse_backend
 from tests.companion.synthetic import textured_pair
 
 torch.set_num_threads(2)
@@ -649,3 +650,23 @@ def test_local_correlation_is_the_dot_product_over_the_window():
     shift = torch.zeros(1, 2, 6, 7)
     shift[:, 0] = 1.0                                          # one pixel right
     assert torch.allclose(warp(f2, shift)[..., :-1], f2[..., 1:], atol=1e-5)
+
+
+def test_variational_refinement_runs_after_raft_when_the_settings_ask():
+    from companion.flow.raft.variational import variational_refine
+
+    img1, img2 = textured_pair(96, 128, (1.5, 0.5))
+    plain = make_flow_backend("raft", random_init_seed=0, iters=2)
+    refined = make_flow_backend("raft", random_init_seed=0, iters=2, variational_levels=2, variational_iters=5)
+    raw = plain.estimate(img1, img2)
+    np.testing.assert_allclose(refined.estimate(img1, img2), variational_refine(img1, img2, raw, 2, 5), atol=1e-5)
+    assert "variational refinement on 2 scales" in refined.describe()
+    name, options = parse_backend("raft:vr=2,vr_iters=5")
+    assert options == {"variational_levels": 2, "variational_iters": 5}
+
+
+@pytest.mark.parametrize("options, needle", [({"variational_levels": 5}, "variational_levels"),
+                                             ({"variational_iters": 0}, "variational_iters")])
+def test_bad_variational_settings_are_refused(options, needle):
+    with pytest.raises(ValueError, match=needle):
+        make_flow_backend("raft", random_init_seed=0, **options)

@@ -23,6 +23,7 @@ from companion.flow.raft.settings import (
     refinement_is_adaptive,
     resolve_precision,
 )
+from companion.flow.raft.variational import variational_refine
 from companion.flow.raft.weights import EXPECTED, load_raft_state_dict
 
 __all__ = ["DEFAULT_WEIGHTS", "INPUT_SCALE_RANGE", "PRECISIONS", "RAFT_DEFAULTS", "InferenceSettings", "RaftBackend",
@@ -83,7 +84,8 @@ class RaftBackend:
     forward), ``device`` ("cpu", "cuda", ...), ``num_threads`` (torch intra-op threads on CPU; None leaves the
     setting alone), ``random_init_seed`` (build seeded random weights instead of loading a file: for timing
     and tests only), and the :class:`InferenceSettings` ``iters``, ``input_scale``, ``mirror_average``,
-    ``refine_scale``, ``refine_iters``, ``refine_min_scale``, ``refine_max_flow`` and ``precision``: each None
+    ``refine_scale``, ``refine_iters``, ``refine_min_scale``, ``refine_max_flow``, ``variational_levels``,
+    ``variational_iters`` and ``precision``: each None
     (the default) takes the weights file's own setting (the one its model card was measured with), or RAFT's
     (:data:`RAFT_DEFAULTS`) for files that carry none and for random weights.
     """
@@ -96,12 +98,14 @@ class RaftBackend:
                  input_scale: float | None = None, mirror_average: bool | None = None,
                  refine_scale: float | None = None, refine_iters: int | None = None,
                  refine_min_scale: float | None = None, refine_max_flow: float | None = None,
+                 variational_levels: int | None = None, variational_iters: int | None = None,
                  precision: str | None = None) -> None:
         if num_threads is not None:
             torch.set_num_threads(int(num_threads))
         overrides = {"iters": iters, "input_scale": input_scale, "mirror_average": mirror_average,
                      "refine_scale": refine_scale, "refine_iters": refine_iters,
                      "refine_min_scale": refine_min_scale, "refine_max_flow": refine_max_flow,
+                     "variational_levels": variational_levels, "variational_iters": variational_iters,
                      "precision": precision}
         RAFT_DEFAULTS.replace(**overrides)           # bad values fail before any file is read
         self.warm_start = bool(warm_start)
@@ -149,6 +153,7 @@ class RaftBackend:
     refine_iters = property(lambda self: self.settings.refine_iters)
     refine_min_scale = property(lambda self: self.settings.refine_min_scale)
     refine_max_flow = property(lambda self: self.settings.refine_max_flow)
+    variational_levels = property(lambda self: self.settings.variational_levels)
 
     @property
     def device(self) -> str:
@@ -187,7 +192,8 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, settings: Inf
 
     With a refinement scale, the first pass's flow starts a second pass of ``refine_iters`` iterations on the
     frames enlarged by :func:`refinement_scale`, whose flow is returned (the 1/8-resolution flow returned
-    stays the first pass's, on the grid that ``previous_low`` is matched against).
+    stays the first pass's, on the grid that ``previous_low`` is matched against).  With
+    ``variational_levels``, the flow is then refined variationally (:func:`.variational.variational_refine`).
     """
     device = torch.device(device)
     precision = precision or resolve_precision(settings.precision, device)
@@ -199,6 +205,8 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, settings: Inf
             scale = refinement_scale(flow, settings.refine_scale, settings.refine_min_scale, settings.refine_max_flow)
             flow, _ = _one_pass(model, img1, img2, settings.refine_iters, scale, flow, None, padding_mode, device,
                                 settings.mirror_average)
+    if settings.variational_levels:
+        flow = variational_refine(img1, img2, flow, settings.variational_levels, settings.variational_iters)
     return flow, low
 
 

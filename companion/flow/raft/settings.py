@@ -26,7 +26,9 @@ class InferenceSettings:
     the first pass, a second pass of ``refine_iters`` iterations on frames enlarged by up to this factor,
     started from the first pass's flow (0: one pass), at the scale :func:`refinement_scale` picks between
     ``refine_min_scale`` and ``refine_scale`` so that the enlarged motion stays within ``refine_max_flow``
-    pixels (0, or ``refine_min_scale`` ≥ ``refine_scale``: always ``refine_scale``); ``precision``: "bf16"
+    pixels (0, or ``refine_min_scale`` ≥ ``refine_scale``: always ``refine_scale``); ``variational_levels``: then
+    the flow refined by the images' own gradients (:mod:`.variational`) on this many scales, coarse to fine,
+    with ``variational_iters`` fixed-point iterations each (0: RAFT's flow as it is); ``precision``: "bf16"
     (the network under bf16 autocast; correlation, upsampling and the flow itself stay float32), "fp32", or
     "auto" (bf16 on a CPU with AVX512-BF16 or AMX, else fp32, see :func:`resolve_precision`).
 
@@ -41,6 +43,8 @@ class InferenceSettings:
     refine_iters: int = 4
     refine_min_scale: float = 2.0
     refine_max_flow: float = 0.0
+    variational_levels: int = 0
+    variational_iters: int = 10
     precision: str = "fp32"
 
     def validated(self) -> InferenceSettings:
@@ -60,6 +64,10 @@ class InferenceSettings:
         if not (np.isfinite(self.refine_max_flow) and self.refine_max_flow >= 0):
             raise ValueError(f"refine_max_flow must be 0 (a fixed refine_scale) or a positive number of pixels "
                              f"(got {self.refine_max_flow})")
+        if not 0 <= self.variational_levels <= 4:
+            raise ValueError(f"variational_levels must be 0 (off) to 4 (got {self.variational_levels})")
+        if self.variational_iters < 1:
+            raise ValueError(f"variational_iters must be >= 1 (got {self.variational_iters})")
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {', '.join(PRECISIONS)} (got {self.precision!r})")
         return self
@@ -67,7 +75,7 @@ class InferenceSettings:
     def replace(self, **changes) -> InferenceSettings:
         """A validated copy with the changes that are not None (None: keep this setting)."""
         kept = {k: v for k, v in changes.items() if v is not None}
-        for key in ("iters", "refine_iters"):
+        for key in ("iters", "refine_iters", "variational_levels", "variational_iters"):
             if key in kept:
                 kept[key] = int(kept[key])
         for key in ("input_scale", "refine_scale", "refine_min_scale", "refine_max_flow"):
@@ -137,7 +145,8 @@ def refinement_is_adaptive(refine_scale: float | None, min_scale: float, max_flo
 
 def describe_settings(settings: InferenceSettings) -> str:
     """'12 iterations at input scale 1, then 4 at scale 2-2.5 (lowered for motion over 64 px)', '4
-    iterations at input scale 1 (one pass)', with ', mirror-averaged' when it is."""
+    iterations at input scale 1 (one pass), variational refinement on 2 scales', with ', mirror-averaged' when
+    it is."""
     text = f"{settings.iters} iterations at input scale {settings.input_scale:g}"
     if refinement_is_adaptive(settings.refine_scale, settings.refine_min_scale, settings.refine_max_flow):
         text += (f", then {settings.refine_iters} at scale {settings.refine_min_scale:g}-{settings.refine_scale:g} "
@@ -146,4 +155,9 @@ def describe_settings(settings: InferenceSettings) -> str:
         text += f", then {settings.refine_iters} at scale {settings.refine_scale:g}"
     else:
         text += " (one pass)"
-    return text + (", mirror-averaged" if settings.mirror_average else "")
+    if settings.mirror_average:
+        text += ", mirror-averaged"
+    if settings.variational_levels:
+        text += f", variational refinement on {settings.variational_levels} scale" + \
+            ("s" if settings.variational_levels > 1 else "")
+    return text
