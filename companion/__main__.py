@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rerun-connect", metavar="ADDRESS",
                    help="stream the recording live to a running Rerun viewer instead "
                         "(e.g. rerun+http://127.0.0.1:9876/proxy)")
+    p.add_argument("--signing-key", type=Path, metavar="FILE",
+                   help="sign every MAVLink message with this PX4 key file (32-byte secret, 8-byte timestamp, mode "
+                        "0600) and drop unsigned replies, for a vehicle that demands signing (pymavlink link only)")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return p
 
@@ -106,6 +109,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"flowgap-companion: error: --lockstep needs --link pymavlink: the {args.link} link cannot run "
               f"in lockstep (mavsdk_server keeps its own wall-clock timers)", file=sys.stderr)
         return 2
+    if args.signing_key is not None:       # before anything waits on the vehicle: a bad key is one line now
+        from companion.link.signing import SigningKeyError, load_key
+
+        if args.link != "pymavlink":
+            print(f"flowgap-companion: error: the {args.link} link cannot sign MAVLink (mavsdk_server has no "
+                  f"message signing): use --link pymavlink with --signing-key", file=sys.stderr)
+            return 2
+        try:
+            load_key(args.signing_key)
+        except SigningKeyError as exc:
+            print(f"flowgap-companion: error: {exc}", file=sys.stderr)
+            return 2
     recording = None
     if args.rerun is not None or args.rerun_connect:
         from companion.recording import RecordingError, open_recording
@@ -140,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
         recording.scene(camera.spec, camera.cloud)
         recording.camera(camera.K, camera.width, camera.height)
     try:
-        link = make_link(args.connect, args.link, tlog_path=runlog.tlog_path, clock=clock)
+        link = make_link(args.connect, args.link, tlog_path=runlog.tlog_path, clock=clock,
+                         signing_key=args.signing_key)
     except (ValueError, LinkError, ImportError) as exc:
         print(f"flowgap-companion: error: {exc}", file=sys.stderr)
         camera.close()

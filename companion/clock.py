@@ -77,12 +77,17 @@ class _ClockBase:
     def wait_for(self, predicate: Callable[[], bool], timeout_s: float, period_s: float = 0.02) -> bool:
         """Poll ``predicate`` every ``period_s`` of this clock's time; False after ``timeout_s``."""
         deadline = self.now() + timeout_s
+        slept_to_deadline = False
         while True:
             if predicate():
                 return True
-            if self.now() >= deadline:
+            # Once slept to the deadline, it has passed: a lockstep vehicle may stop a step short of it (its
+            # physics step, or the microsecond the release travels in), and asking again would never end.
+            if slept_to_deadline or self.now() >= deadline:
                 return False
-            self.sleep_until(min(deadline, self.now() + period_s))
+            wake = min(deadline, self.now() + period_s)
+            slept_to_deadline = wake >= deadline
+            self.sleep_until(wake)
 
 
 class WallClock(_ClockBase):

@@ -69,6 +69,8 @@ class MissionConfig:
     step_timeout_s: float = 8.0  # wall seconds to reach one servo waypoint
     capture_tilt_rad: float = 0.05  # then wait (≤ settle_timeout_s) until roll and pitch are below this: a
     settle_timeout_s: float = 1.5   # vehicle still braking is pitched 10°+ (measured), which blurs parallax
+    estimate_wait_s: float = 0.5    # for the telemetry of a frame's moment to arrive (a slow link delays it)
+    estimate_max_age_s: float = 0.04  # ... to within this (position streams at 30 Hz, attitude at 50 Hz)
     no_gap_limit: int = 8  # servo steps without any gap ever seen before giving up
     min_wall_measurements: int = 3  # flow-based wall distances needed before they steer the push
     finish: str = "hold"  # after the traversal: "hold" or "land"
@@ -131,8 +133,8 @@ class Mission:
             self._enter(State.ARM)
             self.link.arm()
             self._enter(State.TAKEOFF)
+            home_z = self.link.telemetry.position[2]     # on the ground: a retried takeoff may ack in the climb
             self.link.takeoff(self.config.altitude_m)
-            home_z = self.link.telemetry.position[2]
             self.link.wait_for(lambda t: t.position is not None
                                and abs(t.position[2] - (home_z - self.config.altitude_m)) < 0.1
                                and math.hypot(*t.velocity) < 0.2,
@@ -170,8 +172,7 @@ class Mission:
         prev = self.camera.capture()
         # The autopilot's estimates at each frame's time stamp, as a real companion has them (the frame's own
         # pose is the simulator's truth, used only to render and to log).
-        prev_attitude = self.link.telemetry.attitude_at(prev.time_s)
-        prev_position = self.link.telemetry.position
+        prev_position, prev_attitude = self._estimates_at(prev.time_s)
         self._log_frame(0, prev, prev_position, prev_attitude)
         self.runlog.save_images(0, rgb=prev.rgb)
         if self.recording is not None:
@@ -200,8 +201,7 @@ class Mission:
                 raise LinkError("the vehicle disarmed during the servo phase (crash or failsafe)")
             t_frame = self.clock.now()
             frame = self.camera.capture()
-            attitude = self.link.telemetry.attitude_at(frame.time_s)
-            position = self.link.telemetry.position
+            position, attitude = self._estimates_at(frame.time_s)
             seen = perceive(prev.rgb, frame.rgb, prev_attitude, attitude, self.camera.K, self.flow, self.detector,
                             self.derotate)
             flow, top = seen.flow, seen.detection
@@ -332,6 +332,19 @@ class Mission:
     def _event(self, text: str, level: str = "INFO") -> None:
         if self.recording is not None:
             self.recording.event(text, level)
+
+    def _estimates_at(self, time_s: float):
+        """(position, attitude) estimates at a frame's time stamp.  Over a slow link they arrive after the frame:
+        wait (at most ``estimate_wait_s``) until telemetry has come within ``estimate_max_age_s`` of that moment
+        (a stream period: on a prompt link it already has), then interpolate, or take the nearest sample; the
+        latest ones if it never does."""
+        t = self.link.telemetry
+        since = time_s - self.config.estimate_max_age_s
+        if not self.link.try_wait_for(lambda tel: tel.covers(since), self.config.estimate_wait_s,
+                                      "telemetry at the frame's time"):
+            log.debug("telemetry did not reach t=%.3f s within %.1f s; using the latest", time_s,
+                      self.config.estimate_wait_s)
+        return t.position_at(time_s), t.attitude_at(time_s)
 
     def _settle(self) -> None:
         """Wait for a level attitude before the next frame (bounded: a windy or tilted vehicle still flies)."""

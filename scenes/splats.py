@@ -14,6 +14,7 @@ Per-Gaussian surface labels (ground truth, not part of the 3DGS layout) travel i
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -181,6 +182,9 @@ def read_ply_header(path: str | Path) -> tuple[int, list[tuple[str, str]], int, 
                 else:
                     elements.append([current, int(parts[2]), 0, n_vertex < 0, False])
             elif parts[0] == "property":
+                if current is None:
+                    raise PlyError(f"{path}: property line {line!r} comes before any 'element' line (corrupt "
+                                   f"header); re-export the file")
                 if len(parts) >= 2 and parts[1] == "list":
                     if current == "vertex" or not elements:
                         raise PlyError(f"{path}: list property in element {current!r} is not supported; export "
@@ -210,7 +214,34 @@ def read_ply_header(path: str | Path) -> tuple[int, list[tuple[str, str]], int, 
                     raise PlyError(f"{path}: element {name!r} before the vertices has a list property; this "
                                    f"layout is not supported (re-export as a plain 3DGS .ply)")
                 offset += count * size
+        _check_body_size(path, n_vertex, props, offset, os.fstat(f.fileno()).st_size,
+                         [(count, size, has_list) for _, count, size, before, has_list in elements if not before])
         return n_vertex, props, offset, [tuple(e[:4]) for e in elements]
+
+
+def _check_body_size(path: Path, n_vertex: int, props: list[tuple[str, str]], offset: int, file_size: int,
+                     after: list[tuple[int, int, bool]]) -> None:
+    """Refuse a body that cannot be what the header describes, before anything is allocated: a vertex count
+    too big for the file (a corrupt count would otherwise ask for terabytes), or bytes left over when every
+    element has a fixed size (a count too small, or a property line lost or added, shifts every column
+    and would be read as a wrong cloud without complaint). ``after``: (count, row bytes, has a list
+    property) of the elements after the vertices."""
+    row = sum(np.dtype(t).itemsize for _, t in props)
+    need = n_vertex * row
+    available = file_size - offset
+    if need > available:
+        raise PlyError(f"{path}: truncated: header promises {n_vertex} Gaussians ({need} bytes) but only "
+                       f"{max(available, 0)} bytes follow; re-download or re-export the file")
+    if any(has_list for _, _, has_list in after):
+        return  # faces and the like: their size is only known by reading them
+    described = need + sum(count * size for count, size, _ in after)
+    if available > described:
+        raise PlyError(f"{path}: {available - described} bytes more than the header describes ({n_vertex} "
+                       f"Gaussians of {row} bytes): header and data disagree (corrupt or hand-edited file); "
+                       f"re-export it")
+    if available < described:
+        log.warning("%s: the elements after the Gaussians are truncated (%d of %d bytes); the Gaussians are whole",
+                    path, available - need, described - need)
 
 
 def read_ply(path: str | Path) -> GaussianCloud:
@@ -238,10 +269,10 @@ def read_ply(path: str | Path) -> GaussianCloud:
         raise PlyError(f"{path}: f_rest properties are not numbered 0..{n_rest - 1}; re-export the file")
     dtype = np.dtype(props)
     need = n * dtype.itemsize
-    with open(path, "rb") as f:
+    with open(path, "rb") as f:  # read_ply_header has checked that the file holds `need` bytes here
         f.seek(offset)
         buf = f.read(need)
-    if len(buf) < need:
+    if len(buf) < need:  # the file shrank since its header was read
         raise PlyError(f"{path}: truncated: header promises {n} Gaussians ({need} bytes) but only {len(buf)} "
                        f"bytes follow; re-download or re-export the file")
     v = np.frombuffer(buf, dtype=dtype, count=n)
@@ -264,13 +295,37 @@ def read_ply(path: str | Path) -> GaussianCloud:
     if "label" in names:
         labels = v["label"].astype(np.uint8)
     elif _labels_path(path).exists():
-        lab = np.load(_labels_path(path))
-        if lab.shape == (n,):
-            labels = lab.astype(np.uint8)
-        else:
-            log.warning("%s: ignoring label sidecar of shape %s (expected (%d,))", path, lab.shape, n)
+        labels = _read_label_sidecar(_labels_path(path), n)
     cloud = GaussianCloud(cols(["x", "y", "z"]), cols(["scale_0", "scale_1", "scale_2"]),
                           cols(["rot_0", "rot_1", "rot_2", "rot_3"]), v["opacity"].astype(np.float32), sh, labels)
-    if not (np.isfinite(cloud.means).all() and np.isfinite(cloud.log_scales).all()):
-        raise PlyError(f"{path}: non-finite positions or scales (corrupt file); re-export it")
+    _check_finite(path, cloud)
     return cloud
+
+
+def _check_finite(path: Path, cloud: GaussianCloud) -> None:
+    """Refuse NaN or inf anywhere a Gaussian is drawn from: one such value makes the renderer's sums NaN
+    (a black or garbage frame), far from the file that caused it."""
+    arrays = {"positions": cloud.means, "scales": cloud.log_scales, "rotations": cloud.quats,
+              "opacities": cloud.opacity_logits, "colours": cloud.sh}
+    bad_by_name = {name: ~np.isfinite(a).all(axis=tuple(range(1, a.ndim))) for name, a in arrays.items()}
+    bad = np.zeros(len(cloud), bool)
+    for rows in bad_by_name.values():
+        bad |= rows
+    if bad.any():
+        names = ", ".join(name for name, rows in bad_by_name.items() if rows.any())
+        raise PlyError(f"{path}: non-finite values (NaN or inf) in the {names} of {int(bad.sum())} Gaussian(s), "
+                       f"the first at index {int(np.argmax(bad))} (corrupt file); re-export it")
+
+
+def _read_label_sidecar(path: Path, n: int) -> np.ndarray | None:
+    """The ``.labels.npy`` sidecar's labels, None (with a warning) when it is unreadable or of another cloud:
+    labels are ground truth for evaluation, the splats render without them."""
+    try:
+        labels = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
+        log.warning("%s: ignoring unreadable label sidecar (%s)", path, exc)
+        return None
+    if labels.shape != (n,):
+        log.warning("%s: ignoring label sidecar of shape %s (expected (%d,))", path, labels.shape, n)
+        return None
+    return labels.astype(np.uint8)

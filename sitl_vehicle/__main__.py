@@ -14,6 +14,7 @@ from sitl_vehicle.airframes import AIRFRAMES
 from sitl_vehicle.mavlink_io import Home, PortInUseError, parse_hostport
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterError
 from sitl_vehicle.server import ServerConfig, VehicleServer
+from sitl_vehicle.signing import SigningKeyError
 from sitl_vehicle.sim import VehicleConfig
 
 log = logging.getLogger("flowgap-vehicle")
@@ -111,6 +112,15 @@ def build_parser() -> argparse.ArgumentParser:
     net.add_argument("--api-remote", type=_address, help="API link first remote (default 127.0.0.1:14540+N)")
     net.add_argument("--truth-remote", type=_address, help="ground-truth stream target (default 127.0.0.1:14560+N)")
     net.add_argument("--truth-hz", type=float, default=100.0, help="ground-truth stream rate (default 100)")
+    sec = p.add_argument_group("MAVLink 2 signing (as PX4 v1.18)")
+    sec.add_argument("--signing-key", type=Path, metavar="FILE",
+                     help="PX4 key file (32-byte secret, then an 8-byte little-endian timestamp; mode 0600): every "
+                          "link signs what it sends and drops unsigned or badly signed messages but HEARTBEAT, "
+                          "RADIO_STATUS, ADSB_VEHICLE and COLLISION; SETUP_SIGNING changes it (signed, disarmed) "
+                          "and the timestamp is written back at exit. An all-zero file: signing off until a "
+                          "SETUP_SIGNING sets a key, which is then kept in FILE")
+    sec.add_argument("--new-signing-key", type=Path, metavar="FILE",
+                     help="write a new random key file (mode 0600) for --signing-key and exit")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
     return p
 
@@ -136,7 +146,7 @@ def config_from_args(args: argparse.Namespace) -> ServerConfig:
         truth_remote=args.truth_remote or ("127.0.0.1", 14560 + n),
         truth_hz=args.truth_hz, speed=args.speed, seed=args.seed,
         start_position=args.start, start_yaw=math.radians(args.yaw), home=home,
-        params=tuple(args.param), scene=args.scene, lockstep=args.lockstep,
+        params=tuple(args.param), scene=args.scene, lockstep=args.lockstep, signing_key=args.signing_key,
     )
 
 
@@ -159,14 +169,34 @@ def load_world(scene: str | None):
         raise CliError(f"cannot load scene {scene!r}: {exc}") from None
 
 
+def _write_new_key(path: Path) -> int:
+    import time
+
+    from sitl_vehicle.signing import new_key, write_key_file
+
+    if path.exists():
+        print(f"flowgap-vehicle: error: {path} exists: it may hold a key in use; remove it first", file=sys.stderr)
+        return 2
+    try:
+        write_key_file(path, new_key(time.time()))
+    except OSError as exc:
+        print(f"flowgap-vehicle: error: cannot write {path}: {exc.strerror}", file=sys.stderr)
+        return 2
+    print(f"new signing key written to {path} (mode 0600): pass it with --signing-key to the vehicle and the "
+          f"companion (flowgap-sitl --signing-key {path})")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=args.log_level, format="%(asctime)s vehicle %(levelname)s %(message)s")
+    if args.new_signing_key is not None:
+        return _write_new_key(args.new_signing_key)
     stop = threading.Event()
     try:
         config = config_from_args(args)
         server = VehicleServer(config, world=load_world(config.scene))
-    except (CliError, ParameterError, PortInUseError) as exc:
+    except (CliError, ParameterError, PortInUseError, SigningKeyError) as exc:
         print(f"flowgap-vehicle: error: {exc}", file=sys.stderr)
         return 2
 

@@ -56,6 +56,9 @@ AUTO_MODES = (FlightMode.AUTO_MISSION, FlightMode.AUTO_LOITER, FlightMode.AUTO_T
 # the sticks "move" when an axis (throttle counted double: its range is half) changed by COM_RC_STICK_OV
 # within this window: a quick push, not a slow drift or jitter (PX4 thresholds a smoothed stick rate)
 STICK_MOVE_WINDOW_S = 1.0
+# PX4 raises a takeoff altitude below MIS_TAKEOFF_ALT silently when it is short by less than this (Navigator:
+# "don't complain if difference is smaller than 10cm")
+TAKEOFF_ALT_SILENT_MARGIN = 0.1
 # PX4 refuses to arm in Position or Altitude mode with the throttle stick above this (0.5 = centre), and in
 # Stabilized or Manual mode unless the throttle is low
 ARM_THROTTLE_MAX = 0.6
@@ -124,6 +127,7 @@ class Commander:
         self._hold_target: tuple[float, float, float] | None = None
         self._hold_yaw = 0.0
         self._takeoff_target: tuple[float, float, float] | None = None
+        self._takeoff_has_xy = False  # the takeoff flies to a horizontal target too (else: climbs where it is)
         self._land_xy: tuple[float, float] | None = None
         self._offboard_setpoint: Setpoint | None = None
         self._offboard_time = -math.inf
@@ -205,19 +209,36 @@ class Commander:
         self._enter(mode, status)
         return ACCEPTED
 
-    def takeoff(self, status: VehicleStatus, altitude_above_home: float) -> Reply:
+    def takeoff(self, status: VehicleStatus, altitude_above_home: float = NAN,
+                target_xy: tuple[float, float] | None = None) -> Reply:
+        """Takeoff as PX4's Navigator does it: climb to ``altitude_above_home`` (local NED, home = where the
+        vehicle armed), never below the minimum ``MIS_TAKEOFF_ALT`` above home and never down, then Hold.
+
+        A finite altitude below the minimum is raised to it ("Using minimum takeoff altitude", critical when it
+        was short by more than ``TAKEOFF_ALT_SILENT_MARGIN``); a NaN altitude flies the minimum and only says so
+        (info). ``target_xy`` (local north, east) is where to climb to; None climbs where the vehicle is. The
+        heading is kept: PX4 ignores a takeoff yaw on multicopters.
+        """
         if not self.armed:
             return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Takeoff denied: arm first")
+        minimum = self.params["MIS_TAKEOFF_ALT"]
         if not math.isfinite(altitude_above_home):
-            altitude_above_home = self.params["MIS_TAKEOFF_ALT"]
-        if altitude_above_home <= 0:
-            return self._refuse(mavlink.MAV_RESULT_DENIED,
-                                f"Takeoff denied: altitude {altitude_above_home:.2f} m is not above home")
-        x, y, _ = status.position
+            self._say(mavlink.MAV_SEVERITY_INFO, f"Using minimum takeoff altitude: {minimum:.2f} m")
+            altitude_above_home = minimum
+        elif altitude_above_home < minimum:
+            if altitude_above_home < minimum - TAKEOFF_ALT_SILENT_MARGIN:
+                self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Using minimum takeoff altitude: {minimum:.2f} m")
+            altitude_above_home = minimum
+        target_down = self.home[2] - altitude_above_home
+        if target_down > status.position[2]:  # NED: the target is below the vehicle, and takeoff never descends
+            target_down = status.position[2]
+            self._say(mavlink.MAV_SEVERITY_CRITICAL, "Already higher than takeoff altitude")
+        north, east = target_xy if target_xy is not None else status.position[:2]
         self._delayed_failsafe = None
-        self._takeoff_target = (x, y, self.home[2] - altitude_above_home)
+        self._takeoff_target = (north, east, target_down)
+        self._takeoff_has_xy = target_xy is not None
         self._enter(FlightMode.AUTO_TAKEOFF, status)
-        self._say(mavlink.MAV_SEVERITY_INFO, f"Takeoff to {altitude_above_home:.1f} m above home")
+        self._say(mavlink.MAV_SEVERITY_INFO, f"Takeoff to {self.home[2] - target_down:.1f} m above home")
         return ACCEPTED
 
     def land(self, status: VehicleStatus) -> Reply:
@@ -321,7 +342,7 @@ class Commander:
                 self.failsafe = False
                 self._enter(FlightMode.POSCTL, status)
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
-            if abs(status.position[2] - self._takeoff_target[2]) <= self.params["NAV_ACC_RAD"]:
+            if self._takeoff_reached(status):
                 self._say(mavlink.MAV_SEVERITY_INFO, "Takeoff complete: holding")
                 self._hold_target, self._hold_yaw = self._takeoff_target, status.yaw
                 self.mode = FlightMode.AUTO_LOITER
@@ -357,6 +378,14 @@ class Commander:
                             yaw=self._hold_yaw)
         target = self._hold_target or status.position
         return Setpoint(position=target, yaw=self._hold_yaw)
+
+    def _takeoff_reached(self, status: VehicleStatus) -> bool:
+        """At the takeoff altitude within NAV_ACC_RAD, and at its horizontal target if it has one (a vertical
+        climb is judged on altitude alone, so estimate drift sideways does not hold it up)."""
+        reach = self.params["NAV_ACC_RAD"]
+        north, east, down = self._takeoff_target
+        x, y, z = status.position
+        return abs(z - down) <= reach and (not self._takeoff_has_xy or math.hypot(x - north, y - east) <= reach)
 
     def _climb_requested(self) -> bool:
         if self.mode.manual:

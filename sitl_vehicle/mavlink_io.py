@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander, Reply, VehicleStatus
+from sitl_vehicle.link_signing import LinkSigning
 from sitl_vehicle.manual import ManualControlError, sticks_from_manual_control
 from sitl_vehicle.mission import MAX_ITEMS, MissionError, MissionItem, mission_item_from_message
 from sitl_vehicle.modes import FlightMode, UnsupportedMode, mode_from_custom
@@ -66,8 +67,12 @@ class UdpLink:
         self.local_address = self.sock.getsockname()
         self.remote = remote
         self.peer_locked = False
-        self.mav = mavlink.MAVLink(None, system_id, component_id)
-        self.mav.robust_parsing = True
+        self.mav = mavlink.MAVLink(None, system_id, component_id)       # packs (and signs) what we send
+        # a parser of its own: with a key set, pymavlink would also check signatures on receipt, which the
+        # vehicle does itself (sitl_vehicle.signing: PX4's allowlist, the signature before the timestamp)
+        self.parser = mavlink.MAVLink(None, system_id, component_id)
+        self.parser.robust_parsing = True
+        self._signing_clock = None
         self.malformed_datagrams = 0
         self.packets_in = 0
         self.packets_out = 0
@@ -75,11 +80,31 @@ class UdpLink:
     def fileno(self) -> int:
         return self.sock.fileno()
 
+    def sign_outgoing(self, secret: bytes | None, link_id: int, clock) -> None:
+        """Sign every message sent from now on with ``secret`` (None: send unsigned) and ``link_id``, never with a
+        timestamp behind ``clock()`` (the vehicle's signing clock)."""
+        signing = self.mav.signing
+        signing.secret_key = secret
+        signing.sign_outgoing = secret is not None
+        signing.link_id = link_id
+        self._signing_clock = clock if secret is not None else None
+        if clock is not None:
+            signing.timestamp = max(signing.timestamp, clock())
+
+    def signing_timestamp(self) -> int:
+        """The timestamp the next signed message will carry."""
+        return self.mav.signing.timestamp
+
     def send(self, msg) -> None:
         if self.remote is None:
             return
+        if self._signing_clock is not None:
+            self.mav.signing.timestamp = max(self.mav.signing.timestamp, self._signing_clock())
+        data = msg.pack(self.mav)
+        # a sequence number per link and message, as PX4's: ground stations count link loss from its gaps
+        self.mav.seq = (self.mav.seq + 1) % 256
         try:
-            self.sock.sendto(msg.pack(self.mav), self.remote)
+            self.sock.sendto(data, self.remote)
             self.packets_out += 1
         except OSError as exc:
             # Nobody listening (ECONNREFUSED via ICMP) is normal before a client starts.
@@ -106,7 +131,7 @@ class UdpLink:
             out.extend(messages)
 
     def _parse_datagram(self, data: bytes) -> list:
-        mav = self.mav
+        mav = self.parser
         mav.buf = bytearray()
         mav.buf_index = 0
         mav.expected_length = mavlink.HEADER_LEN_V1 + 2
@@ -275,7 +300,7 @@ class MavlinkVehicleInterface:
 
     def __init__(self, commander: Commander, params: ParameterStore, home: Home,
                  status_fn: Callable[[], VehicleStatus], telemetry_fn: Callable[[], Telemetry],
-                 system_id: int = SYSTEM_ID):
+                 system_id: int = SYSTEM_ID, signing: LinkSigning | None = None):
         self.commander = commander
         self.params = params
         self.home = home
@@ -292,10 +317,12 @@ class MavlinkVehicleInterface:
         self._boot_wall = time.time()
         self._statustext_id = 0
         self._after_ack: list = []  # messages a command asked for, sent right after its COMMAND_ACK
+        self.signing = signing if signing is not None else LinkSigning()
 
     def add_link(self, link: UdpLink) -> None:
         self.links.append(link)
         self.schedules[link.name] = StreamSchedule()
+        self.signing.attach(link)
 
     # ----------------------------------------------------------------------------------- sending
     def broadcast(self, msg) -> None:
@@ -412,10 +439,19 @@ class MavlinkVehicleInterface:
         """Handle every message waiting on ``links`` (default: all of them)."""
         for link in self.links if links is None else links:
             for msg in link.receive():
-                try:
-                    self.handle(msg, link)
-                except Exception:  # noqa: BLE001 — one bad message must not stop the vehicle
-                    log.exception("error handling %s from %s link", msg.get_type(), link.name)
+                self.receive(msg, link)
+
+    def receive(self, msg, link: UdpLink) -> None:
+        """One message as it arrived on ``link``: through the signing check, then handled."""
+        if not self.signing.admit(msg, link):
+            report = self.signing.pending_report()
+            if report is not None:
+                self.statustext(mavlink.MAV_SEVERITY_WARNING, report[1], report[0])
+            return
+        try:
+            self.handle(msg, link)
+        except Exception:  # noqa: BLE001 — one bad message must not stop the vehicle (the fuzz tests hunt these)
+            log.exception("error handling %s from %s link", msg.get_type(), link.name)
 
     def handle(self, msg, link: UdpLink) -> None:
         kind = msg.get_type()
@@ -436,6 +472,15 @@ class MavlinkVehicleInterface:
         self._after_ack.clear()
         if reply.text and not reply.accepted and not reply.announced:  # one STATUSTEXT per refusal, as PX4
             self.statustext(mavlink.MAV_SEVERITY_CRITICAL, reply.text, link)
+
+    def _on_setup_signing(self, msg, link: UdpLink) -> None:
+        """PX4 v1.18: for this autopilot only; unsigned only while no key is set (the signing check has already
+        dropped an unsigned one otherwise); never while armed; a blank key turns signing off."""
+        if msg.target_system not in (0, self.system_id) or msg.target_component not in (0, COMPONENT_ID):
+            return
+        # the commander's word, not the airframe's: an ARM accepted a moment ago has not reached the motors yet
+        applied, text = self.signing.setup(msg, self.commander.armed)
+        self.statustext(mavlink.MAV_SEVERITY_INFO if applied else mavlink.MAV_SEVERITY_CRITICAL, text, link)
 
     def _on_heartbeat(self, msg, link: UdpLink) -> None:
         if msg.type == mavlink.MAV_TYPE_GCS:
@@ -461,8 +506,16 @@ class MavlinkVehicleInterface:
             force = math.isfinite(p[1]) and int(p[1]) == FORCE_ARM_MAGIC
             return c.arm(status, force) if p[0] == 1.0 else c.disarm(status, force)
         if command == mavlink.MAV_CMD_NAV_TAKEOFF:
-            above_home = p[6] - self.home.to_global(c.home)[2] if math.isfinite(p[6]) else math.nan
-            return c.takeoff(status, above_home)
+            # PX4: param7 is AMSL (NaN: the minimum, MIS_TAKEOFF_ALT above home; the commander raises lower ones);
+            # param4, the yaw, is ignored on multicopters; params 5/6 are lat/lon, and NaN or both exactly 0
+            # (zero-initialised, as MAVProxy's `takeoff` sends them; PX4 PR #28792) mean "where it is"
+            home_amsl = self.home.to_global(c.home)[2]
+            above_home = p[6] - home_amsl if math.isfinite(p[6]) else math.nan
+            lat, lon = p[4], p[5]
+            target_xy = None
+            if math.isfinite(lat) and math.isfinite(lon) and not (lat == 0.0 and lon == 0.0):
+                target_xy = self.home.to_local(lat, lon, home_amsl)[:2]
+            return c.takeoff(status, above_home, target_xy)
         if command == mavlink.MAV_CMD_NAV_LAND:
             return c.land(status)
         if command == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
@@ -479,6 +532,11 @@ class MavlinkVehicleInterface:
             return c.start_mission(status, int(_nan_to(p[0], 0)))
         if command == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
             return c.set_mission_current(int(_nan_to(p[0], 0)), status)
+        if command in (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE) \
+                and not (math.isfinite(p[0]) and 0 <= p[0] < 1 << 24):
+            # found by fuzzing: int(NaN) raised here; a message id is a 24-bit number
+            return Reply(mavlink.MAV_RESULT_DENIED, f"Command {command} denied: message id {p[0]} is not a "
+                                                    f"MAVLink message id (0..16777215)")
         if command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             return self._set_interval(link, int(p[0]), p[1])
         if command == mavlink.MAV_CMD_REQUEST_MESSAGE:

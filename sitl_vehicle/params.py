@@ -81,7 +81,8 @@ class ParameterStore:
 
 # Commander and navigator parameters (PX4 names and defaults).
 COMMANDER_PARAMS = [
-    ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.5, 100.0, "m", "Takeoff altitude above home"),
+    ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.5, 100.0, "m", "Takeoff altitude above home: the default, and the "
+              "minimum a takeoff command is raised to"),
     ParamSpec("COM_OF_LOSS_T", 1.0, 0.05, 60.0, "s", "Offboard setpoint timeout before failsafe"),
     ParamSpec("COM_OBL_RC_ACT", 5.0, 0.0, 7.0, "enum",
               "Offboard loss action: 3 = Return, 4 = Land, 5 = Hold (other PX4 values fall back to Hold)"),

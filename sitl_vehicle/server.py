@@ -21,6 +21,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander, VehicleStatus
+from sitl_vehicle.link_signing import LinkSigning
 from sitl_vehicle.lockstep import LockstepHold
 from sitl_vehicle.mavlink_io import Home, MavlinkVehicleInterface, Telemetry, UdpLink, truth_odometry
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore, apply_binding, bound_specs
@@ -50,11 +51,13 @@ class ServerConfig:
     params: tuple[tuple[str, float], ...] = ()  # PX4 parameter overrides applied at boot
     scene: str | None = None
     lockstep: bool = False  # advance only as far as the companion releases (sitl_vehicle.lockstep); no speed
+    signing_key: Path | None = None  # PX4 key file (sitl_vehicle.signing): sign every link, drop unsigned input
 
 
 class VehicleServer:
     def __init__(self, config: ServerConfig, world=None):
         self.config = config
+        self._signing_closed = False
         self.scene = config.scene
         self.sim = VehicleSim(config.vehicle, rng=np.random.default_rng(config.seed), world=world,
                               initial_position=config.start_position, initial_yaw=config.start_yaw)
@@ -64,7 +67,8 @@ class VehicleServer:
             self.params.set(name, value)
         self.commander = Commander(self.params, home=(0.0, 0.0, 0.0))
         self.interface = MavlinkVehicleInterface(self.commander, self.params, config.home,
-                                                 self.vehicle_status, self.telemetry)
+                                                 self.vehicle_status, self.telemetry,
+                                                 signing=LinkSigning(config.signing_key))
         self.links: list[UdpLink] = []
         try:
             for name, local, remote in (("gcs", config.gcs_local, config.gcs_remote),
@@ -134,6 +138,7 @@ class VehicleServer:
             "wall_time_s": round(self.wall_time_s, 3),
             "final_position_ned": [round(v, 4) for v in sim.truth.position],
             "malformed_datagrams": sum(link.malformed_datagrams for link in self.links),
+            "signing": self.interface.signing.summary(),
             "setpoints_received": self.interface.setpoints_received,
             "setpoints_rejected": self.interface.setpoints_rejected,
             "clock": "lockstep" if self.config.lockstep else "realtime",
@@ -255,6 +260,9 @@ class VehicleServer:
         self.close()
 
     def close(self) -> None:
+        if not self._signing_closed:  # the signing clock goes back to the key file once, as PX4 at shutdown
+            self._signing_closed = True
+            self.interface.signing.close()
         for link in self.links:
             link.close()
         if getattr(self, "truth_link", None) is not None:

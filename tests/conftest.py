@@ -9,6 +9,21 @@ import logging  # noqa: E402
 
 import pytest  # noqa: E402
 
+try:  # hypothesis is in the dev extra; without it the fuzz tests skip themselves (pytest.importorskip)
+    from hypothesis import HealthCheck, settings
+except ImportError:  # pragma: no cover
+    settings = None
+if settings is not None:
+    # The fuzz tests' profiles (docs/testing.md): "ci", the default, is the same examples on every run so a
+    # failure in CI is a failure on every machine; HYPOTHESIS_PROFILE=deep (or FLOWGAP_FUZZ=deep) draws fresh
+    # ones, many more (support.fuzzing scales each budget). No deadline: a loaded 2-core machine runs slow.
+    # No example database: nothing written into the checkout; a failure prints the example to reproduce.
+    settings.register_profile("ci", deadline=None, derandomize=True, database=None, print_blob=True,
+                              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+    settings.register_profile("deep", settings.get_profile("ci"), derandomize=False)
+    settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE")
+                          or ("deep" if os.environ.get("FLOWGAP_FUZZ") == "deep" else "ci"))
+
 
 @pytest.fixture(autouse=True)
 def _logging_as_it_was():

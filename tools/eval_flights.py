@@ -17,6 +17,10 @@ declined (``refused``: it held, and the vehicle touched nothing). A flight succe
 through an opening without touching anything, or, where no opening was passable, when it refused.
 Flights run in lockstep (the vehicle advances only when its companion waits), so the same seed gives the same
 rows at any machine load, as fast as the CPU allows; ``--realtime`` paces them by ``--speed`` instead.
+With ``--link-loss``/``--link-delay``/``--link-duplicate``/``--link-reorder`` every flight's API link runs
+through a seeded fault relay (``tools.link_relay``), seeded from the flight's own seed, or with ``--link-seed``
+from ``default_rng([link seed, crc32(scene), start index])``; each row records what its link did
+(``link_faults``) and the summary the settings.
 Writes ``flights.json`` (rows + summary) and ``flights.md``, and prints the table.
 """
 
@@ -37,6 +41,7 @@ import numpy as np
 from tqdm import tqdm
 
 from tools.launch import launch
+from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
 
 log = logging.getLogger("flowgap-eval-flights")
 
@@ -140,6 +145,15 @@ def draw_flight(spec, seed: int, start_index: int, world: str, altitude: float =
                           round(float(rng.uniform(0, HARD_WIND_MPS[1])), 2), round(float(rng.uniform(0, 360)), 1))
         flight["camera_delay_s"] = round(float(rng.uniform(*HARD_CAMERA_DELAY_S)), 3)
     return flight
+
+
+def flight_link_faults(faults: LinkFaults | None, scene: str, start_index: int) -> LinkFaults | None:
+    """One flight's link faults: with a ``--link-seed``, its own seed drawn from (link seed, scene, start index);
+    without, the seed stays open and the flight's vehicle seed fills it (``tools.launch.launch``)."""
+    if faults is None or faults.seed is None:
+        return faults
+    rng = np.random.default_rng([faults.seed, zlib.crc32(scene.encode()), start_index])
+    return LinkFaults(**{**faults.settings(), "seed": int(rng.integers(0, 2**31 - 1))})
 
 
 def _opening_in_view(spec, start) -> bool:
@@ -248,6 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"])
     p.add_argument("-o", "--out", type=Path, default=Path("runs/eval_flights"), help="output directory")
+    add_link_fault_arguments(p)
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     from scenes.build import resolve_spec
@@ -258,6 +273,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if not (args.speed > 0 and args.latency >= 0):
         print("flowgap-eval-flights: error: --speed must be positive and --latency >= 0", file=sys.stderr)
+        return 2
+    try:
+        link_faults = link_faults_from_args(args)
+    except LinkFaultError as exc:
+        print(f"flowgap-eval-flights: error: {exc}", file=sys.stderr)
         return 2
     scenes = list(args.scenes) or ([] if args.random else list(SUITE))
     try:
@@ -281,7 +301,8 @@ def main(argv: list[str] | None = None) -> int:
             v = launch(scene, args.out / f"{labels[scene]}-{i}", flight["start"], args.speed, instance, args.flow,
                        args.detector, seed=flight["seed"], images=False, log_sink=None, altitude=flight["altitude"],
                        lockstep=not args.realtime, latency_s=args.latency, wind=flight["wind"],
-                       camera_delay_s=flight["camera_delay_s"])
+                       camera_delay_s=flight["camera_delay_s"],
+                       link_faults=flight_link_faults(link_faults, labels[scene], i))
         finally:
             instances.release(instance)
         v["scene"] = labels[scene]
@@ -299,7 +320,8 @@ def main(argv: list[str] | None = None) -> int:
     summary.update(world=args.world, flow=args.flow, detector=args.detector,
                    clock="realtime" if args.realtime else "lockstep",
                    speed=args.speed if args.realtime else None, latency_s=args.latency, seed=args.seed,
-                   starts_per_scene=args.starts, total_wall_s=round(time.monotonic() - t0, 1))
+                   starts_per_scene=args.starts, total_wall_s=round(time.monotonic() - t0, 1),
+                   link_faults=None if link_faults is None else link_faults.settings())
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "flights.json").write_text(json.dumps({"summary": summary, "rows": rows}, indent=2) + "\n")
     table = markdown(rows, summary)

@@ -3,7 +3,8 @@
 Starts ``flowgap-vehicle`` and ``flowgap-companion`` as two OS processes with matching addresses (PX4's
 instance numbering: API 14540+N, truth 14560+N), streams their logs with a prefix, stops both when the
 companion's mission ends (or on Ctrl-C), and reports the verdict the *vehicle* wrote from its own ground
-truth: no companion code marks its own homework.
+truth: no companion code marks its own homework.  With ``--link-loss``/``--link-delay``/... a seeded
+fault relay (:mod:`tools.link_relay`) sits on the API link between them, like a lossy telemetry radio.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import time
 from pathlib import Path
 
 from sitl_vehicle.__main__ import triple_arg
+from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
 
 
 def _wind(text: str) -> tuple[float, ...]:
@@ -60,14 +62,17 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
            timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float = 1.5,
            link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0,
            wind: tuple[float, ...] | None = None, yaw_deg: float | None = None,
-           camera_delay_s: float = 0.0, rerun: bool = False, rerun_connect: str | None = None) -> dict:
+           camera_delay_s: float = 0.0, rerun: bool = False, rerun_connect: str | None = None,
+           link_faults: LinkFaults | None = None, signing_key: Path | None = None) -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json).
 
     ``lockstep``: both processes on the vehicle's clock (``speed`` is then unused); ``latency_s``: the
     companion's camera-to-setpoint latency; ``wind``: (mean m/s, gust m/s[, from deg]) on the vehicle;
     ``yaw_deg``: the start heading (default: the scene's ``start_yaw_deg``); ``camera_delay_s``: how long after
     exposure each camera frame reaches the companion; ``rerun``: the companion records the flight in
-    ``run_dir/flight.rrd`` (``rerun_connect``: streams it to a running viewer instead)."""
+    ``run_dir/flight.rrd`` (``rerun_connect``: streams it to a running viewer instead); ``link_faults``: relay
+    the API link through seeded faults (a seed of None: ``seed``'s), recorded in the verdict's ``link_faults``;
+    ``signing_key``: a PX4 key file both processes sign with (the vehicle then drops unsigned messages)."""
     if yaw_deg is None:
         from scenes.build import resolve_spec
 
@@ -97,6 +102,17 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         companion_cmd += ["--rerun-connect", rerun_connect]
     elif rerun:
         companion_cmd += ["--rerun", str(run_dir / "flight.rrd")]
+    if signing_key is not None:
+        vehicle_cmd += ["--signing-key", str(signing_key)]
+        companion_cmd += ["--signing-key", str(signing_key)]
+    relay = None
+    if link_faults is not None and link_faults.active:
+        from tools.link_relay import relay_for_instance
+
+        relay = relay_for_instance(link_faults.with_seed(seed), instance, lockstep, speed).start()
+        vehicle_cmd.append(f"--api-remote=127.0.0.1:{relay.vehicle_api_address[1]}")
+        if lockstep:
+            vehicle_cmd.append(f"--truth-remote=127.0.0.1:{relay.vehicle_truth_address[1]}")
     t0 = time.monotonic()
     companion = _start(companion_cmd, "[companion]", log_sink)
     vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink)
@@ -118,6 +134,8 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
     finally:
         _stop(companion)
         _stop(vehicle)
+        if relay is not None:
+            relay.stop()
     wall = time.monotonic() - t0
     vehicle_verdict = json.loads(vehicle_result.read_text()) if vehicle_result.exists() else {}
     summary_path = run_dir / "companion" / "summary.json"
@@ -145,6 +163,8 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         "latency_s": latency_s,
         "wind": vehicle_verdict.get("wind"),
         "camera_delay_s": camera_delay_s,
+        "link_faults": None if relay is None else relay.report(),
+        "signing": vehicle_verdict.get("signing"),
         "run_dir": str(run_dir),
     }
     board = run_dir / "companion" / "storyboard.png"
@@ -207,11 +227,32 @@ def main(argv: list[str] | None = None) -> int:
                    help="record the flight for the Rerun viewer in RUN_DIR/flight.rrd (extra: flowgap[viz])")
     p.add_argument("--rerun-connect", metavar="ADDRESS",
                    help="stream the recording live to a running Rerun viewer instead")
+    p.add_argument("--signing-key", type=Path, metavar="FILE",
+                   help="MAVLink 2 signing with this PX4 key file (flowgap-vehicle --new-signing-key makes one): "
+                        "the vehicle and the companion sign, and the vehicle drops unsigned messages")
+    add_link_fault_arguments(p)
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s sitl %(levelname)s %(message)s")
     if not args.speed > 0:
         print(f"flowgap-sitl: error: --speed must be positive, got {args.speed}", file=sys.stderr)
         return 2
+    try:
+        link_faults = link_faults_from_args(args)
+    except LinkFaultError as exc:
+        print(f"flowgap-sitl: error: {exc}", file=sys.stderr)
+        return 2
+    if args.signing_key is not None:
+        from sitl_vehicle.signing import SigningKeyError, read_key_file
+
+        try:
+            read_key_file(args.signing_key)
+        except SigningKeyError as exc:
+            print(f"flowgap-sitl: error: {exc}", file=sys.stderr)
+            return 2
+        if args.link != "pymavlink":
+            print("flowgap-sitl: error: --signing-key needs --link pymavlink (mavsdk_server has no message signing)",
+                  file=sys.stderr)
+            return 2
     try:
         from scenes.build import resolve_spec
 
@@ -232,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
                      args.seed, args.no_noise, args.timeout, log_sink=None if args.quiet else sys.stdout,
                      link=args.link, lockstep=args.lockstep, latency_s=args.latency, wind=args.wind,
                      yaw_deg=args.yaw, camera_delay_s=args.camera_delay, rerun=args.rerun,
-                     rerun_connect=args.rerun_connect)
+                     rerun_connect=args.rerun_connect, link_faults=link_faults, signing_key=args.signing_key)
     if args.result:
         args.result.parent.mkdir(parents=True, exist_ok=True)
         args.result.write_text(json.dumps(verdict, indent=2) + "\n")

@@ -9,12 +9,22 @@ from companion.link.base import AutopilotLink, Endpoint, LinkError, LinkLost, Te
 BACKENDS = ("pymavlink", "mavsdk")
 
 
-def make_link(url: str, backend: str = "pymavlink", tlog_path: Path | None = None, clock=None) -> AutopilotLink:
-    """A link to the autopilot at ``url``; ``clock`` (:mod:`companion.clock`, default the wall clock) paces it."""
+def make_link(url: str, backend: str = "pymavlink", tlog_path: Path | None = None, clock=None,
+              signing_key: Path | None = None) -> AutopilotLink:
+    """A link to the autopilot at ``url``; ``clock`` (:mod:`companion.clock`, default the wall clock) paces it;
+    ``signing_key`` (a PX4 key file, :mod:`companion.link.signing`) signs what it sends and checks what comes."""
     if backend == "pymavlink":
         from companion.link.pymavlink_link import PymavlinkLink
 
-        return PymavlinkLink(url, tlog_path=tlog_path, clock=clock)
+        key = None
+        if signing_key is not None:
+            from companion.link.signing import load_key
+
+            key = load_key(signing_key)
+        return PymavlinkLink(url, tlog_path=tlog_path, clock=clock, signing_key=key)
+    if signing_key is not None:
+        raise ValueError(f"the {backend} link cannot sign MAVLink (mavsdk_server has no message signing): use "
+                         f"--link pymavlink with --signing-key")
     if backend == "mavsdk":
         if clock is not None and clock.name != "wall":
             raise ValueError("the mavsdk link cannot run in lockstep: mavsdk_server keeps its own wall-clock "

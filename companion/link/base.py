@@ -110,6 +110,8 @@ class TelemetryCache:
     statustexts: list[tuple[int, str]] = field(default_factory=list)
     # (autopilot time s, roll, pitch, yaw): to read the attitude at a camera frame's time stamp
     attitude_history: deque = field(default_factory=lambda: deque(maxlen=2000), repr=False)  # 40 s at 50 Hz
+    # (autopilot time s, north, east, down): the position estimate at a frame's time stamp
+    position_history: deque = field(default_factory=lambda: deque(maxlen=2000), repr=False)  # 60 s at 30 Hz
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     # called with (autopilot time s, position=..., attitude=...) on each position or attitude update, on the
     # link's receive thread (a recording of the flight: companion.recording)
@@ -128,18 +130,38 @@ class TelemetryCache:
         with self.lock:
             history = list(self.attitude_history)
             latest = self.attitude_euler
-        if not history:
-            return latest
-        times = [h[0] for h in history]
-        i = bisect.bisect_left(times, time_s)
-        if i == 0:
-            return history[0][1:]
-        if i == len(history):
-            return history[-1][1:]
-        (t0, *a0), (t1, *a1) = history[i - 1], history[i]
-        w = (time_s - t0) / (t1 - t0) if t1 > t0 else 0.0
-        yaw_step = math.remainder(a1[2] - a0[2], math.tau)  # interpolate yaw across ±π
-        return (a0[0] + w * (a1[0] - a0[0]), a0[1] + w * (a1[1] - a0[1]), a0[2] + w * yaw_step)
+        return _interpolate(history, time_s, latest, angle_axis=2)
+
+    def position_at(self, time_s: float) -> tuple[float, float, float] | None:
+        """The position estimate at an autopilot time stamp, as :meth:`attitude_at` reads the attitude."""
+        with self.lock:
+            history = list(self.position_history)
+            latest = self.position
+        return _interpolate(history, time_s, latest)
+
+    def covers(self, time_s: float) -> bool:
+        """Whether position and attitude have both been heard at or after ``time_s`` (autopilot time): over a
+        slow link the estimates for a frame's moment arrive after the frame.  Read under ``lock`` (as
+        ``AutopilotLink.wait_for`` calls its predicates)."""
+        return all(h and h[-1][0] >= time_s for h in (self.position_history, self.attitude_history))
+
+
+def _interpolate(history: list, time_s: float, latest, angle_axis: int | None = None):
+    """Linear interpolation of (time, *values) samples at ``time_s``; ``angle_axis`` interpolates across ±π."""
+    if not history:
+        return latest
+    times = [h[0] for h in history]
+    i = bisect.bisect_left(times, time_s)
+    if i == 0:
+        return tuple(history[0][1:])
+    if i == len(history):
+        return tuple(history[-1][1:])
+    (t0, *a0), (t1, *a1) = history[i - 1], history[i]
+    w = (time_s - t0) / (t1 - t0) if t1 > t0 else 0.0
+    steps = [b - a for a, b in zip(a0, a1, strict=True)]
+    if angle_axis is not None:
+        steps[angle_axis] = math.remainder(steps[angle_axis], math.tau)
+    return tuple(a + w * d for a, d in zip(a0, steps, strict=True))
 
 
 class AutopilotLink(abc.ABC):

@@ -95,7 +95,9 @@ class MavsdkLink(AutopilotLink):
                 t.position = (pv.position.north_m, pv.position.east_m, pv.position.down_m)
                 t.velocity = (pv.velocity.north_m_s, pv.velocity.east_m_s, pv.velocity.down_m_s)
                 t.position_time = self.clock.now()
+                # MAVSDK's position carries no time stamp: the latest attitude's stands in for it
                 stamp = t.attitude_history[-1][0] if t.attitude_history else 0.0
+                t.position_history.append((stamp, *t.position))
             t.notify(stamp, position=t.position)
 
         def attitude(e, _):

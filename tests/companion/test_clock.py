@@ -180,3 +180,27 @@ def test_closing_hands_the_vehicle_its_settling_time_and_ends_every_wait():
     clock.close()        # ... until the clock closes: one last second for the vehicle, then every wait ends
     assert done.wait(2)
     assert [r[0] for r in vehicle.releases][-1] == pytest.approx(1.5)
+
+
+class SteppingVehicle(ScriptedVehicle):
+    """Reaches the last 4 ms physics step at or before a release (as the vehicle does within half a step), and
+    reports it in whole microseconds read back as the side channel reads them (``time_usec * 1e-6``)."""
+
+    def advance(self, until_s, sent_messages):
+        self.releases.append((until_s, sent_messages))
+        steps = int((until_s - self.now) / 0.004 + 0.5)
+        self.now = round((self.now + steps * 0.004) * 1e6) * 1e-6
+        return self.now, self.sent
+
+
+@pytest.mark.parametrize("timeout_s", [3.0, 3.001])    # 3.2 s: 3200000 * 1e-6 < 3.2; 3.201 s: a step short
+def test_a_wait_that_times_out_ends_even_when_the_vehicle_stops_short_of_its_deadline(timeout_s):
+    vehicle = SteppingVehicle(start_s=0.2)
+    clock = LockstepClock(vehicle, settle_s=0.0)
+    result = []
+    waiter = threading.Thread(target=lambda: result.append(clock.wait_for(lambda: False, timeout_s, 0.005)),
+                              daemon=True)
+    clock.leave()                     # only the waiter takes part
+    waiter.start()
+    waiter.join(timeout=10)
+    assert result == [False] and len(vehicle.releases) <= 752

@@ -224,8 +224,10 @@ def _intervals_mask(t: np.ndarray, intervals: list[tuple[float, float]]) -> np.n
 
 
 def analyse_tlog(path: str | Path, *, truth: str = "auto", dialect: str = "ardupilotmega",
-                 progress: bool = False) -> Report:
-    """Analyse the tlog at ``path``; never raises for bad input (see ``Report.notes``/``usable``)."""
+                 progress: bool = False, signing_secret: bytes | None = None) -> Report:
+    """Analyse the tlog at ``path``; never raises for bad input (see ``Report.notes``/``usable``).
+
+    ``signing_secret``: also check every packet's MAVLink 2 signature with this key (metrics ``signatures``)."""
     path = Path(path)
     rep = Report(path=str(path))
     try:
@@ -268,6 +270,11 @@ def analyse_tlog(path: str | Path, *, truth: str = "auto", dialect: str = "ardup
               ("summary", lambda: _summary(rep, frames, mav_mod)),
               ("events", lambda: _events(rep, frames, mav_mod)),
               ("offboard", lambda: _offboard(rep, frames, mav_mod, truth_name, truth_src)))
+    if signing_secret is not None:
+        from tools.tlog.signatures import check_signatures
+
+        stages += (("signatures", lambda: rep.metrics.__setitem__("signatures",
+                                                                  check_signatures(frames, signing_secret))),)
     for name, stage in stages:
         try:
             stage()
@@ -343,12 +350,22 @@ def split_sequence_loss(seqs: list[int], max_gap: int = 64, max_counters: int = 
     return sum(st[1] for st in streams), len(streams)
 
 
+def _utc_text(t_us: int) -> str | None:
+    """ISO UTC time of a tlog time in µs, None when it is outside what a date can hold (a corrupt timestamp)."""
+    try:
+        return datetime.fromtimestamp(t_us / 1e6, tz=timezone.utc).isoformat()
+    except (ValueError, OverflowError, OSError):
+        return None
+
+
 def _summary(rep: Report, f: Frames, mav: Any) -> None:
     good = f.good
     t0 = int(f.ts.min())
     t1 = int(f.ts.max())
     rep.series["t0_us"] = t0
-    rep.metrics["start_utc"] = datetime.fromtimestamp(t0 / 1e6, tz=timezone.utc).isoformat()
+    rep.metrics["start_utc"] = _utc_text(t0)
+    if rep.metrics["start_utc"] is None:
+        rep.note(f"the first packet's time ({t0} µs) is not a UNIX time (corrupt log?): start time unknown")
     rep.metrics["duration_s"] = (t1 - t0) / 1e6
     if np.any(np.diff(f.ts) < 0):
         n_back = int((np.diff(f.ts) < 0).sum())

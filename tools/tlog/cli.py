@@ -56,6 +56,9 @@ def _build_parser() -> argparse.ArgumentParser:
                         "local_position_ned_cov, odometry, local_position_ned), optionally @SYSID:COMPID")
     p.add_argument("--dialect", default="ardupilotmega",
                    help="pymavlink v2.0 dialect to decode with (default: %(default)s, a superset of common)")
+    p.add_argument("--signing-key", type=Path, metavar="FILE",
+                   help="check every packet's MAVLink 2 signature with this PX4 key file and count good, "
+                        "replayed, bad and unsigned packets (per source)")
     p.add_argument("--json", action="store_true", help="print metrics.json to stdout instead of the summary")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -144,6 +147,11 @@ def main(argv: list[str] | None = None) -> int:
     if not path.is_file():
         print(f"{PROG}: error: not a file: {path}", file=sys.stderr)
         return 2
+    try:  # refuse an unreadable file here, in one line, before the analysis would note it too
+        path.open("rb").close()
+    except OSError as exc:
+        print(f"{PROG}: error: cannot read {path}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     try:
         from tools.tlog.framing import load_dialect
 
@@ -151,12 +159,20 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         print(f"{PROG}: error: unknown pymavlink dialect {args.dialect!r}", file=sys.stderr)
         return 2
+    secret = None
+    if args.signing_key is not None:
+        from sitl_vehicle.signing import SigningKeyError, read_key_file
+
+        try:
+            secret = read_key_file(args.signing_key).secret
+        except SigningKeyError as exc:
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
+            return 2
     t = time.perf_counter()
     rep = analyse_tlog(path, truth=args.truth, dialect=args.dialect,
-                       progress=not args.quiet and sys.stderr.isatty())
+                       progress=not args.quiet and sys.stderr.isatty(), signing_secret=secret)
     if rep.frames is None and rep.notes and rep.notes[0].startswith("cannot read"):
-        print(f"{PROG}: error: {rep.notes[0]}", file=sys.stderr)
-        return 2
+        return 2  # it became unreadable after the check above: the analysis's note has said so, in one line
     elapsed = time.perf_counter() - t
     written = None
     if args.out is not None:

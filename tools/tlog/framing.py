@@ -145,6 +145,22 @@ def _packet_crc_ok(data: bytes, p: int, size: int, msgid: int, extras: dict[int,
     return crc == (data[body_end] | (data[body_end + 1] << 8))
 
 
+def _time_disagrees_with_a_consistent_pair(data: bytes, p: int, size: int, n: int) -> bool:
+    """Whether the record at ``p`` is followed by two sane records whose times agree with each other but not
+    with its own: then its timestamp is the corrupt one (a first record with a flipped time byte would
+    otherwise become the log's start time, hundreds of years away from the rest)."""
+    q = p + size
+    nxt = _header(data, q, n)
+    if nxt is None or q + nxt[0] > n:
+        return False
+    after = _header(data, q + nxt[0], n)
+    if after is None:
+        return False
+    t_own, t_next = _TS.unpack_from(data, p)[0], _TS.unpack_from(data, q)[0]
+    t_after = _TS.unpack_from(data, q + nxt[0])[0]
+    return abs(t_next - t_own) > TS_WINDOW_US and abs(t_after - t_next) <= TS_WINDOW_US
+
+
 def _resync(data: bytes, start: int, n: int, last_ts: int | None, extras: dict[int, int]) -> int | None:
     """Offset of the next plausible record at or after ``start`` (None: nothing more in the file).
 
@@ -182,13 +198,25 @@ def _resync(data: bytes, start: int, n: int, last_ts: int | None, extras: dict[i
                     return p  # the whole file is one record
             elif chain and _packet_crc_ok(data, p, size, msgid, extras) is not False:
                 return p
-            elif p == 0 and _packet_crc_ok(data, p, size, msgid, extras):
+            elif p == 0 and not _time_disagrees_with_a_consistent_pair(data, p, size, n) and \
+                    _packet_crc_ok(data, p, size, msgid, extras):
                 return p  # the file starts with a good packet, damage right after it
         elif in_window:
             if chain or _packet_crc_ok(data, p, size, msgid, extras):
                 return p
         elif chain and not at_end and _packet_crc_ok(data, p, size, msgid, extras):
             return p  # a genuine jump in time
+
+
+def _cut_in_timestamp(data: bytes, pos: int, n: int, last_ts: int | None) -> bool:
+    """Whether the file ends inside a record's 8-byte timestamp: at most 8 bytes left, and they start as the
+    last record's time does (the top 4 bytes of a µs time change once in 71 minutes). Such a tail is a
+    truncated record, not non-MAVLink data."""
+    left = n - pos
+    if last_ts is None or not 0 < left <= 8:
+        return False
+    k = min(left, 4)
+    return data[pos:pos + k] == _TS.pack(last_ts)[:k]
 
 
 def _scan_offsets(data: bytes, extras: dict[int, int], progress: bool) -> tuple[array, int, int, int]:
@@ -252,7 +280,8 @@ def _scan_offsets(data: bytes, extras: dict[int, int], progress: bool) -> tuple[
         # slow path: something is wrong here; find the next plausible record
         nxt = _resync(data, pos, n, last_ts, extras)
         if nxt is None:
-            if n - pos < 20 + 255 + SIGNATURE_LEN and _header(data, pos, n) is not None:
+            if (n - pos < 20 + 255 + SIGNATURE_LEN and _header(data, pos, n) is not None) or \
+                    _cut_in_timestamp(data, pos, n, last_ts):
                 trailing = n - pos
             else:
                 garbage += n - pos

@@ -67,6 +67,10 @@ def summary_text(rep: Report) -> str:
                      f"estimate error {_err_line(tr.get('estimate_error'))}")
     if m["statustext"]:
         lines.append(f"  {len(m['statustext'])} STATUSTEXT, last: {m['statustext'][-1]['text']!r}")
+    if m.get("signatures"):
+        from tools.tlog.signatures import signatures_line
+
+        lines.append("  " + signatures_line(m["signatures"]))
     if rep.notes:
         lines.append(f"  {len(rep.notes)} note(s), see metrics.json / report.md")
     return "\n".join(lines)
