@@ -670,3 +670,21 @@ def test_variational_refinement_runs_after_raft_when_the_settings_ask():
 def test_bad_variational_settings_are_refused(options, needle):
     with pytest.raises(ValueError, match=needle):
         make_flow_backend("raft", random_init_seed=0, **options)
+
+
+def test_a_sequence_reuses_the_shared_frames_features_and_flows_as_if_it_did_not():
+    a, b = textured_pair(96, 128, (1.5, 0.5))
+    c = np.roll(b, (1, 2), axis=(0, 1))
+    seq = make_flow_backend("raft", random_init_seed=0, iters=3, refine_scale=0, variant="small-convex")
+    fresh = make_flow_backend("raft", random_init_seed=0, iters=3, refine_scale=0, variant="small-convex")
+    assert seq.reuses_features
+    calls = []
+    original = seq.model.fnet.forward
+    seq.model.fnet.forward = lambda x, *args, **kw: calls.append(x.shape[0]) or original(x, *args, **kw)
+    seq.estimate(a, b)
+    second = seq.estimate(b, c)                       # b's features come from the first pair
+    assert calls == [2, 1]                            # one frame encoded for the second pair, not two
+    np.testing.assert_allclose(second, fresh.estimate(b, c), atol=1e-3)
+    seq.estimate(a, c)                                # a new first frame: both encoded again
+    assert calls == [2, 1, 2]
+    assert not make_flow_backend("raft", random_init_seed=0, refine_scale=2.0).reuses_features

@@ -76,6 +76,7 @@ class RaftOutput(NamedTuple):
     flow_low: torch.Tensor                  # N×2×(H/8)×(W/8), the state to warm-start the next pair from
     flow_up: torch.Tensor                   # N×2×H×W, the final estimate
     predictions: list[torch.Tensor]         # per-iteration N×2×H×W estimates when requested, else []
+    fmap2: torch.Tensor | None = None       # the second frame's features: the next pair's first (see forward)
 
 
 def coords_grid(n: int, h: int, w: int, device=None, dtype=torch.float32) -> torch.Tensor:
@@ -89,7 +90,9 @@ class RAFT(nn.Module):
     """RAFT / RAFT-small.  ``forward(image1, image2, iters, flow_init)`` on N×3×H×W images in 0..255.
 
     H and W must be multiples of 8 (use :class:`InputPadder`).  ``flow_init`` (N×2×H/8×W/8) starts the
-    refinement from a previous estimate (warm start) instead of zero.
+    refinement from a previous estimate (warm start) instead of zero.  ``fmap1``: the first frame's features
+    when they are already known (the previous pair's ``fmap2`` in a sequence: the feature encoder normalises
+    each image on its own, so they are the same features), which saves one of the two encoder passes.
     """
 
     def __init__(self, config: RaftConfig | None = None) -> None:
@@ -117,7 +120,8 @@ class RAFT(nn.Module):
                 last.bias.copy_(bilinear_mask_logits() / self.update_block.mask_scale)
 
     def forward(self, image1: torch.Tensor, image2: torch.Tensor, iters: int = 12,
-                flow_init: torch.Tensor | None = None, all_predictions: bool = False) -> RaftOutput:
+                flow_init: torch.Tensor | None = None, all_predictions: bool = False,
+                fmap1: torch.Tensor | None = None) -> RaftOutput:
         n, _, h, w = image1.shape
         if image2.shape != image1.shape:
             raise ValueError(f"images differ in shape: {tuple(image1.shape)} vs {tuple(image2.shape)}")
@@ -129,11 +133,20 @@ class RAFT(nn.Module):
 
         # 1. features of both frames (one batch), context of the first (and their quarter-resolution maps)
         quarter = self.refiner is not None
-        fout = self.fnet(torch.cat([image1, image2], dim=0), with_quarter=quarter)
+        if fmap1 is not None and quarter:
+            raise ValueError("known first-frame features cannot be used with the quarter-resolution refinement")
+        if fmap1 is not None:
+            fmap2 = self.fnet(image2).float()
+            if fmap1.shape != fmap2.shape:
+                raise ValueError(f"fmap1 must be {tuple(fmap2.shape)}, got {tuple(fmap1.shape)}")
+        else:
+            fout = self.fnet(torch.cat([image1, image2], dim=0), with_quarter=quarter)
+            if quarter:
+                fout, fquarter = fout
+            fmap1, fmap2 = fout.float().chunk(2, dim=0)
         cout = self.cnet(image1, with_quarter=quarter)
         if quarter:
-            (fout, fquarter), (cout, cquarter) = fout, cout
-        fmap1, fmap2 = fout.float().chunk(2, dim=0)
+            cout, cquarter = cout
         with torch.autocast(image1.device.type, enabled=False):   # the correlation volume stays float32
             corr_fn = CorrBlock(fmap1, fmap2, num_levels=cfg.corr_levels, radius=cfg.corr_radius)
         net, inp = torch.split(cout, [cfg.hidden_dim, cfg.context_dim], dim=1)
@@ -163,7 +176,7 @@ class RAFT(nn.Module):
             q1, q2 = fquarter.chunk(2, dim=0)
             flow_up = self._refine(flow_up, q1, q2, cquarter)
             predictions.append(flow_up)
-        return RaftOutput(flow_low, flow_up, predictions if all_predictions else [])
+        return RaftOutput(flow_low, flow_up, predictions if all_predictions else [], fmap2)
 
     def _refine(self, flow_up: torch.Tensor, f1: torch.Tensor, f2: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
         """The quarter-resolution correction of a full-resolution flow (see :mod:`.refine`)."""
