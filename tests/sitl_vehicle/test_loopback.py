@@ -9,7 +9,7 @@ import time
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from support.mavclient import MavClient, px4_mode_name, wait_until
+from support.mavclient import MavClient, px4_mode_name, wait_sim, wait_streamed, wait_until
 
 ALT = 1.5
 SQUARE = [(2.0, 0.0), (2.0, 2.0), (0.0, 2.0), (0.0, 0.0)]
@@ -31,7 +31,7 @@ def take_off(client, altitude: float = ALT):
 
 def enter_offboard(client, hold=(0.0, 0.0, -ALT)):
     client.stream(hold)
-    time.sleep(0.4)  # PX4 wants the stream running before the switch
+    wait_streamed(client, 8)  # PX4 wants the stream running before the switch
     ack = client.set_mode("OFFBOARD")
     assert ack is not None and ack.result == mavlink.MAV_RESULT_ACCEPTED
 
@@ -120,7 +120,7 @@ def test_offboard_loss_fails_safe_to_hold(make_vehicle):
     hb = client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "LOITER")
     assert hb is not None and hb.system_status == mavlink.MAV_STATE_CRITICAL
     # Hold keeps the vehicle in the air where it was.
-    time.sleep(1.0)
+    wait_sim(server, 4.0)
     assert abs(server.sim.truth.position[2] + ALT) < 0.1 and abs(server.sim.truth.position[0] - 0.5) < 0.15
 
 
@@ -188,7 +188,7 @@ def test_nan_and_unsupported_frame_setpoints_are_rejected_with_statustext(make_v
                                                            math.nan, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0)
     text = client.statustext("rejected", 3)
     assert text is not None and "position x is nan" in text and "type_mask" in text
-    time.sleep(1.1 / 4)  # the vehicle rate-limits this warning to one a second of simulation
+    wait_sim(server, 1.1)  # the vehicle rate-limits this warning to one a second of simulation
     with client.lock:
         client.conn.mav.set_position_target_local_ned_send(0, 1, 1, mavlink.MAV_FRAME_LOCAL_ENU, mask,
                                                            0, 0, -1, 0, 0, 0, 0, 0, 0, 0, 0)
@@ -332,7 +332,7 @@ def test_position_mode_flies_with_joystick_input_and_fails_safe_when_it_stops(ma
     ack = client.set_mode("POSCTL")
     assert ack.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # no joystick yet
     client.stream_sticks()
-    time.sleep(0.3)
+    wait_streamed(client, 6)
     assert client.set_mode("POSCTL").result == mavlink.MAV_RESULT_ACCEPTED
     assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "POSCTL") is not None
     assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink.MAV_RESULT_ACCEPTED
@@ -346,7 +346,7 @@ def test_position_mode_flies_with_joystick_input_and_fails_safe_when_it_stops(ma
     client.stream_sticks()
     stopped = client.recv("LOCAL_POSITION_NED", 10, lambda m: math.hypot(m.vx, m.vy) < 0.05)
     assert stopped is not None, "did not stop when the sticks were centred"
-    time.sleep(1.0)  # 4 s of simulation: the position holds
+    wait_sim(server, 4.0)  # the position holds
     x, y, z = server.sim.truth.position
     assert abs(x - stopped.x) < 0.1 and abs(y) < 0.1 and abs(z - z_hold) < 0.15
     client.stop_stream()
@@ -369,7 +369,7 @@ def test_malformed_manual_control_is_rejected_with_statustext(make_vehicle):
 def test_stabilized_mode_flies_on_the_throttle_and_position_mode_catches_it(make_vehicle):
     server, client = make_vehicle(params=(("COM_RC_LOSS_T", 1.5),))
     client.stream_sticks(z=0)
-    time.sleep(0.3)
+    wait_streamed(client, 6)
     assert client.set_mode("STABILIZED").result == mavlink.MAV_RESULT_ACCEPTED
     assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "STABILIZED") is not None
     assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink.MAV_RESULT_ACCEPTED
@@ -379,7 +379,7 @@ def test_stabilized_mode_flies_on_the_throttle_and_position_mode_catches_it(make
     assert client.set_mode("POSCTL").result == mavlink.MAV_RESULT_ACCEPTED
     assert client.recv("LOCAL_POSITION_NED", 10, lambda m: abs(m.vz) < 0.05 and abs(m.vx) < 0.05) is not None
     z = server.sim.truth.position[2]
-    time.sleep(0.5)
+    wait_sim(server, 2.0)
     assert abs(server.sim.truth.position[2] - z) < 0.1
     assert client.command(mavlink.MAV_CMD_NAV_LAND).result == mavlink.MAV_RESULT_ACCEPTED
     assert wait_until(lambda: not server.sim.armed, 30) and not server.sim.crashed

@@ -206,7 +206,7 @@ def test_an_unsigned_setup_signing_cannot_replace_the_key(make_vehicle, key_file
     server, client = make_vehicle(signing_key=key_file)
     with client.lock:
         client.conn.mav.setup_signing_send(1, 1, list(OTHER), 0)
-    time.sleep(0.5)
+    assert wait_until(lambda: server.interface.signing.summary()["rejected_unsigned"] >= 1, 3.0)
     assert signing.read_key_file(key_file).secret == KEY
     sign_client(client)                                      # the old key still commands the vehicle
     ack = client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)

@@ -18,7 +18,7 @@ from sitl_vehicle.commander import Commander, VehicleStatus
 from sitl_vehicle.mavlink_io import Home, MavlinkVehicleInterface
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore
-from support.mavclient import px4_mode_name
+from support.mavclient import px4_mode_name, wait_sim
 
 HOME_AMSL = 488.0  # Home()'s default altitude: the local origin, where the vehicles here arm
 METRES_PER_DEG_LAT = 6_378_137.0 * math.pi / 180.0
@@ -203,7 +203,7 @@ def climbs_and_holds(client, server, target, timeout: float = 20.0) -> None:
     assert settled is not None, f"the vehicle did not settle at {target}: it is at {server.sim.truth.position}"
     hold = client.recv("HEARTBEAT", 5, lambda m: px4_mode_name(m) == "LOITER")
     assert hold is not None and hold.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-    time.sleep(0.5)  # a couple of simulated seconds later: still up there, still armed
+    wait_sim(server, 2.0)  # a couple of simulated seconds later: still up there, still armed
     later = client.recv("HEARTBEAT", 3)
     assert later.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED and server.commander.armed
     assert math.dist(server.sim.truth.position, target) < 0.15

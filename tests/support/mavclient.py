@@ -25,6 +25,7 @@ class MavClient:
         self.setpoint: tuple | None = None
         self.sticks: tuple | None = None
         self.sent_setpoints = 0
+        self.streamed = 0          # messages the stream thread has sent (setpoints or sticks)
         self.lock = threading.Lock()
 
     def wait_heartbeat(self, timeout: float = 10.0):
@@ -84,9 +85,11 @@ class MavClient:
                 while not self._stream_stop.wait(1.0 / hz):
                     if self.setpoint is not None:
                         self.send_position(*self.setpoint)
+                        self.streamed += 1
                     if self.sticks is not None:
                         with self.lock:
                             self.conn.mav.manual_control_send(1, *self.sticks, 0)
+                        self.streamed += 1
             self._stream_thread = threading.Thread(target=loop, daemon=True)
             self._stream_thread.start()
 
@@ -113,6 +116,20 @@ def wait_until(predicate, timeout: float, period: float = 0.02) -> bool:
             return True
         time.sleep(period)
     return False
+
+
+def wait_sim(server, seconds: float, timeout: float = 60.0) -> None:
+    """Wait until ``seconds`` of the vehicle's simulated time have passed: a test's "some time later" in the
+    vehicle's own clock, which a loaded machine slows but never skips."""
+    until = server.sim.time_s + seconds
+    assert wait_until(lambda: server.sim.time_s >= until, timeout, 0.005), \
+        f"simulated time stuck at {server.sim.time_s:.3f} s, short of {until:.3f} s"
+
+
+def wait_streamed(client, count: int, timeout: float = 20.0) -> None:
+    """Wait until the client's stream thread has sent ``count`` more setpoints or stick messages."""
+    target = client.streamed + count
+    assert wait_until(lambda: client.streamed >= target, timeout, 0.005), "the stream stopped"
 
 
 def distance(a, b) -> float:
