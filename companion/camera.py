@@ -104,6 +104,9 @@ class TruthPoseListener:
 class SplatCamera:
     """Renders ``scene`` at the true pose: the simulated forward camera (optical axis = body x).
 
+    ``scene``: a suite name, spec ``.json``, capture scene ``.json`` (its ``.ply`` placed in NED) or ``.ply``.
+    ``spec`` is the procedural scene's spec (None for a capture or a bare ``.ply``: no walls to draw), ``capture_spec``
+    a capture's :class:`scenes.capture.CaptureSpec` (else None).
     ``truth``: the ground-truth stream's URL (listened to in a thread) or a :class:`PoseSource`.  ``delay_s``:
     each frame reaches the caller this long after its exposure, on ``clock`` (the companion's; a real camera's
     frames arrive late too), stamped with the exposure's time."""
@@ -111,8 +114,11 @@ class SplatCamera:
     def __init__(self, scene: str, truth: str | PoseSource, backend: str = "cpu", camera=None, clock=None,
                  delay_s: float = 0.0):
         from scenes import PinholeCamera, load_scene
+        from scenes.capture import CaptureSpec
 
-        self.spec, self.cloud = load_scene(scene)
+        spec, self.cloud = load_scene(scene)
+        self.capture_spec = spec if isinstance(spec, CaptureSpec) else None
+        self.spec = None if self.capture_spec is not None else spec
         self.camera = camera or PinholeCamera()
         self.width, self.height = self.camera.width, self.camera.height
         self.K = self.camera.K

@@ -11,7 +11,9 @@ Stable interfaces (other packages rely on these):
 * ``scenes.library.SUITE`` -- the 16 suite names ``window{1..4}_{brick,granite,newspaper,stone}``;
   ``scenes.library.DEFAULT_SCENE`` = ``"window1_brick"``.
 * ``scenes.load_scene(name_or_path) -> (SceneSpec, GaussianCloud)`` -- builds and caches on demand
-  under ``cache/scenes/`` (override with ``$FLOWGAP_SCENE_CACHE``).
+  under ``cache/scenes/`` (override with ``$FLOWGAP_SCENE_CACHE``); for a capture scene ``.json``
+  (``scenes.capture``: a third-party 3DGS ``.ply`` placed in NED) ``(CaptureSpec, GaussianCloud in NED)``.
+  Both specs have ``start_ned`` and ``start_yaw_deg``.
 * ``scenes.random_scene(rng: numpy.random.Generator) -> SceneSpec`` -- random training/Monte-Carlo
   scene; ``scenes.build.build_scene(spec) -> GaussianCloud`` builds it in memory (~0.2 s, no disk),
   ``load_scene(spec)`` also caches it on disk (~15 MB).
@@ -27,7 +29,8 @@ Stable interfaces (other packages rely on these):
   ``scenes.groundtruth.sample_pose_pair(spec, rng) -> (Pose, Pose)`` for random training pairs.
 * ``scenes.collision.load_collision(name_or_path) -> SceneCollision`` with ``.clearance((x, y, z))``
   (metres to the nearest solid, negative inside; wall slab minus openings, frames; not the floor) and
-  ``.wall_x`` (front face).
+  ``.wall_x`` (front face); for a capture scene a ``scenes.occupancy.CaptureCollision`` (the distance field of
+  its opaque splats, cached beside it) with ``.clearance`` and ``.gate`` (the rectangle to fly through).
 * ``scenes.splats.read_ply / write_ply`` (standard 3DGS layout) raising ``PlyError`` on bad files.
 """
 

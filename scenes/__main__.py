@@ -5,6 +5,9 @@
     flowgap-scenes render window1_brick --pose 1.0 0.2 -1.5 --rpy 0 0 5 -o frame.png
     flowgap-scenes info cache/scenes/window1_brick.ply
     flowgap-scenes montage -o docs/images/suite_montage.png
+    flowgap-scenes place room.ply --scale-from 0:0:0,1.2:0:0,3.5 -o room.capture.json   # draft a capture scene
+    flowgap-scenes render room.capture.json --pose 1 0 -1.5 --rpy 0 0 30                # a view of it in NED
+    flowgap-scenes info room.capture.json                                                # its gate, start, field
 """
 
 from __future__ import annotations
@@ -33,11 +36,16 @@ def _camera(args):
     return PinholeCamera(args.width, args.height, math.radians(args.vfov_deg))
 
 
-def _pose(args):
+def _pose(args, spec=None):
+    """--pose and --rpy; left out, the scene's start at its flight altitude, facing its start heading."""
     from scenes.camera import Pose, euler_to_quat
 
-    roll, pitch, yaw = (math.radians(v) for v in args.rpy)
-    return Pose(tuple(args.pose), euler_to_quat(roll, pitch, yaw))
+    start = tuple(getattr(spec, "start_ned", (0.0, 0.0, 0.0)))
+    altitude = getattr(spec, "altitude_m", 1.5)
+    position = args.pose if args.pose is not None else (start[0], start[1], start[2] - altitude)
+    rpy = args.rpy if args.rpy is not None else (0.0, 0.0, getattr(spec, "start_yaw_deg", 0.0))
+    roll, pitch, yaw = (math.radians(v) for v in rpy)
+    return Pose(tuple(float(v) for v in position), euler_to_quat(roll, pitch, yaw))
 
 
 def _depth_vis(depth: np.ndarray) -> np.ndarray:
@@ -55,6 +63,7 @@ def cmd_build(args) -> int:
     from tqdm import tqdm
 
     from scenes.build import build_cached, resolve_spec
+    from scenes.capture import CaptureSpec
     from scenes.library import SUITE
     from scenes.splats import read_ply_header
 
@@ -66,6 +75,13 @@ def cmd_build(args) -> int:
     bar = tqdm(specs, desc="scenes", unit="scene", disable=len(specs) < 2 or args.quiet, leave=False)
     for spec in bar:
         t0 = time.perf_counter()
+        if isinstance(spec, CaptureSpec):     # a capture's splats exist; what is built is its collision field
+            from scenes.occupancy import load_capture_collision
+
+            world = load_capture_collision(spec)
+            tqdm.write(f"{spec.name}: capture scene, collision field {world.field.shape} of {world.field.voxel_m:g} m "
+                       f"voxels, ready in {time.perf_counter() - t0:.1f} s (cached beside it)")
+            continue
         path, built = build_cached(spec, args.cache_dir, force=args.force)
         n = read_ply_header(path)[0]
         state = f"built in {time.perf_counter() - t0:.1f} s" if built else "up to date"
@@ -75,14 +91,20 @@ def cmd_build(args) -> int:
 
 def cmd_render(args) -> int:
     from scenes.build import load_scene
+    from scenes.capture import CaptureSpec
     from scenes.render import render_splats
 
-    _, cloud = load_scene(args.scene, args.cache_dir)
-    cam, pose = _camera(args), _pose(args)
+    spec, cloud = load_scene(args.scene, args.cache_dir)
+    cam, pose = _camera(args), _pose(args, spec)
     t0 = time.perf_counter()
     res = render_splats(cloud, cam, pose, backend=args.backend)
     ms = 1e3 * (time.perf_counter() - t0)
-    panel = np.concatenate([res.rgb, _depth_vis(res.depth), LABEL_COLOURS[np.minimum(res.label, 4)]], 1)
+    third = LABEL_COLOURS[np.minimum(res.label, 4)]
+    if isinstance(spec, CaptureSpec):      # captures have no labels: show the gate instead
+        from scenes.capture_views import draw_gate
+
+        third = draw_gate(res.rgb.copy(), cam, pose, spec.gate)
+    panel = np.concatenate([res.rgb, _depth_vis(res.depth), third], 1)
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(out), panel[..., ::-1]):
@@ -91,14 +113,21 @@ def cmd_render(args) -> int:
     drange = f"{res.depth[valid].min():.2f}-{res.depth[valid].max():.2f} m" if valid.any() else "none"
     counts = ", ".join(f"{LABEL_NAMES[k].split(' ')[0]} {100 * (res.label == k).mean():.1f}%"
                        for k in range(5) if (res.label == k).any())
-    print(f"{out}: RGB | depth | label, {cam.width}x{cam.height}, {args.backend} {ms:.0f} ms "
-          f"(first call includes JIT), depth {drange}; {counts}")
+    capture = isinstance(spec, CaptureSpec)
+    print(f"{out}: RGB | depth | {'gate' if capture else 'label'}, {cam.width}x{cam.height}, {args.backend} {ms:.0f} "
+          f"ms (first call includes JIT), depth {drange}; "
+          + (f"pose NED {[round(v, 3) for v in pose.position]}" if capture else counts))
     return 0
 
 
 def cmd_info(args) -> int:
+    from scenes.capture import is_capture_file
     from scenes.splats import read_ply
 
+    if is_capture_file(args.ply):
+        from scenes.capture_cli import info_capture
+
+        return info_capture(args.ply)
     cloud = read_ply(args.ply)
     lo, hi = cloud.bounds()
     print(f"{args.ply}: {len(cloud):,} Gaussians, SH degree {cloud.sh_degree}")
@@ -148,7 +177,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Build, render and inspect flowgap's Gaussian-splat scenes (NED world; the vehicle starts "
                     "at (0, 0, -1.5) looking along +x at a wall with an opening).",
         epilog="Scenes are suite names (window1..4 x brick/granite/newspaper/stone, e.g. window1_brick), spec "
-               ".json files, or (render) 3DGS .ply files.")
+               ".json files, capture scene .json files (a third-party 3DGS .ply placed in NED: see 'place'), or "
+               "(render) 3DGS .ply files.")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -161,7 +191,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("build", help="build scenes into the cache (skips those up to date)",
                        description="Generate scenes' splats (.ply + labels + spec .json) into the cache. The cache "
                                    "key is the spec JSON plus the generator code, so changed scenes rebuild.")
-    p.add_argument("scenes", nargs="*", help="suite names or spec .json paths")
+    p.add_argument("scenes", nargs="*", help="suite names, spec .json paths or capture scene .json paths (for "
+                                             "these, the collision field is built)")
     p.add_argument("--suite", action="store_true", help="build all 16 suite scenes")
     p.add_argument("--force", action="store_true", help="rebuild even if up to date")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -172,11 +203,13 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Render one view and write RGB, depth (turbo colour map, near = red) and the "
                                    "label image (wall red, frame yellow, beyond-the-wall blue, floor grey) side by "
                                    "side.")
-    p.add_argument("scene", help="suite name, spec .json or 3DGS .ply")
-    p.add_argument("--pose", type=float, nargs=3, default=(0.0, 0.0, -1.5), metavar=("X", "Y", "Z"),
-                   help="NED body position in metres (default: the start pose 0 0 -1.5)")
-    p.add_argument("--rpy", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("ROLL", "PITCH", "YAW"),
-                   help="body attitude in degrees (default level, facing north)")
+    p.add_argument("scene", help="suite name, spec .json, capture scene .json (rendered in NED, its gate drawn in "
+                                 "the third panel) or 3DGS .ply")
+    p.add_argument("--pose", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="NED body position in metres (default: the scene's start at its flight altitude; 0 0 -1.5 "
+                        "for the suite)")
+    p.add_argument("--rpy", type=float, nargs=3, default=None, metavar=("ROLL", "PITCH", "YAW"),
+                   help="body attitude in degrees (default level, facing the scene's start heading)")
     p.add_argument("--backend", choices=("cpu", "torch", "reference"), default="cpu", help="renderer")
     p.add_argument("-o", "--out", "--output", dest="output", metavar="PNG",
                    default="render.png", help="output PNG (default %(default)s)")
@@ -184,10 +217,16 @@ def build_parser() -> argparse.ArgumentParser:
     cache_arg(p)
     p.set_defaults(func=cmd_render)
 
-    p = sub.add_parser("info", help="Gaussian count, SH degree and bounds of a .ply",
-                       description="Read a 3DGS .ply (ours, the reference trainer's, nerfstudio's) and summarise it.")
-    p.add_argument("ply", type=Path, help="path to a .ply")
+    p = sub.add_parser("info", help="Gaussian count, SH degree and bounds of a .ply or capture scene",
+                       description="Read a 3DGS .ply (ours, the reference trainer's, nerfstudio's) and summarise it; "
+                                   "for a capture scene .json, also its placement, gate, start and collision field "
+                                   "(built and cached beside it if need be).")
+    p.add_argument("ply", type=Path, help="path to a .ply or a capture scene .json")
     p.set_defaults(func=cmd_info)
+
+    from scenes.capture_cli import add_place_parser
+
+    add_place_parser(sub)
 
     p = sub.add_parser("montage", help="all 16 suite scenes from the start pose in one PNG",
                        description="Render every suite scene from the start pose into a 4x4 grid.")

@@ -24,6 +24,7 @@ import numpy as np
 
 from scenes import textures
 from scenes.camera import matrix_to_quat
+from scenes.capture import CaptureSpec, capture_cloud, is_capture_file, load_capture
 from scenes.geometry import distance_to_polygon_edges, points_in_polygon
 from scenes.spec import SceneSpec, SpecError
 from scenes.splats import (
@@ -235,35 +236,46 @@ def build_cached(spec: SceneSpec, cache_dir: Path | None = None, force: bool = F
     return ply, True
 
 
-def resolve_spec(name_or_path: str | Path | SceneSpec) -> SceneSpec:
-    """A library name, a spec ``.json`` path, or a ``.ply`` with a sibling ``.json`` -> :class:`SceneSpec`."""
+def resolve_spec(name_or_path: str | Path | SceneSpec | CaptureSpec) -> SceneSpec | CaptureSpec:
+    """A library name, a spec ``.json`` path, a ``.ply`` with a sibling spec ``.json``, or a capture scene ``.json``
+    (:mod:`scenes.capture`) -> its :class:`SceneSpec` or :class:`CaptureSpec` (no splats are read)."""
     from scenes import library
 
-    if isinstance(name_or_path, SceneSpec):
+    if isinstance(name_or_path, SceneSpec | CaptureSpec):
         return name_or_path
     s = str(name_or_path)
     if s in library.NAMED:
         return library.NAMED[s]()
     p = Path(s)
     if p.suffix == ".json" and p.exists():
-        return SceneSpec.load(p)
-    if p.suffix == ".ply" and p.with_suffix(".json").exists():
-        return SceneSpec.load(p.with_suffix(".json"))
+        return load_capture(p) if is_capture_file(p) else SceneSpec.load(p)
+    sibling = _procedural_sibling(p) if p.suffix == ".ply" else None
+    if sibling is not None:
+        return SceneSpec.load(sibling)
     raise SpecError(f"unknown scene {s!r}; use a suite name such as {library.DEFAULT_SCENE!r} "
-                    f"(see 'flowgap-scenes build --help') or a path to a spec .json")
+                    f"(see 'flowgap-scenes build --help'), a path to a spec .json or a capture scene .json")
 
 
-def load_scene(name_or_path: str | Path | SceneSpec, cache_dir: Path | None = None
-               ) -> tuple[SceneSpec | None, GaussianCloud]:
-    """(spec, cloud) for a suite name, spec ``.json`` or ``SceneSpec`` (built and cached on demand),
-    or for a ``.ply`` file (spec from a sibling ``.json`` if present, else None)."""
-    p = Path(str(name_or_path)) if not isinstance(name_or_path, SceneSpec) else None
+def _procedural_sibling(ply: Path) -> Path | None:
+    """The spec ``.json`` beside a ``.ply`` that we built (a capture file there places the .ply elsewhere: not it)."""
+    js = ply.with_suffix(".json")
+    return js if js.exists() and not is_capture_file(js) else None
+
+
+def load_scene(name_or_path: str | Path | SceneSpec | CaptureSpec, cache_dir: Path | None = None
+               ) -> tuple[SceneSpec | CaptureSpec | None, GaussianCloud]:
+    """(spec, cloud in NED) for a suite name, spec ``.json`` or ``SceneSpec`` (built and cached on demand), a
+    capture scene ``.json`` or ``CaptureSpec`` (its ``.ply`` read and placed), or a ``.ply`` file as it is (spec
+    from a sibling spec ``.json`` if present, else None)."""
+    p = Path(str(name_or_path)) if not isinstance(name_or_path, SceneSpec | CaptureSpec) else None
     if p is not None and p.suffix == ".ply":
         if not p.exists():
             raise PlyError(f"{p}: no such file; check the path")
-        spec = SceneSpec.load(p.with_suffix(".json")) if p.with_suffix(".json").exists() else None
-        return spec, read_ply(p)
+        sibling = _procedural_sibling(p)
+        return (SceneSpec.load(sibling) if sibling is not None else None), read_ply(p)
     spec = resolve_spec(name_or_path)
+    if isinstance(spec, CaptureSpec):
+        return spec, capture_cloud(spec)
     ply, _ = build_cached(spec, cache_dir)
     return spec, read_ply(ply)
 

@@ -1,4 +1,6 @@
-"""Collision geometry of a scene for the vehicle's physics loop (plain Python floats, called at 500 Hz).
+"""Collision geometry of a procedural scene for the vehicle's physics loop (plain Python floats, called at 500 Hz);
+a capture scene's is the distance field of its splats (:mod:`scenes.occupancy`), which ``load_collision`` returns
+for a capture ``.json``.
 
 Solids: the wall slab ``wall_x <= x <= wall_x + thickness`` over the wall rectangle minus the openings,
 each opening's frame band (standing ``frame_depth`` proud of the wall), and the background surface seen
@@ -125,8 +127,16 @@ class SceneCollision:
         return f"SceneCollision({self.spec.name!r}, wall_x={self.wall_x})"
 
 
-def load_collision(scene: str | Path | SceneSpec) -> SceneCollision:
-    """Collision geometry of a suite name, spec ``.json`` path, or ``.ply`` with a sibling ``.json``."""
+def load_collision(scene: str | Path | SceneSpec):
+    """Collision geometry of a suite name, spec ``.json`` path, ``.ply`` with a sibling spec ``.json``
+    (:class:`SceneCollision`), or capture scene ``.json`` (a :class:`scenes.occupancy.CaptureCollision`: the
+    distance field of its splats, built once and cached beside the scene, and its gate)."""
     from scenes.build import resolve_spec
+    from scenes.capture import CaptureSpec
 
-    return SceneCollision(resolve_spec(scene))
+    spec = resolve_spec(scene)
+    if isinstance(spec, CaptureSpec):
+        from scenes.occupancy import load_capture_collision
+
+        return load_capture_collision(spec)
+    return SceneCollision(spec)

@@ -116,6 +116,11 @@ class SceneSpec:
 
     # --- derived geometry -------------------------------------------------------------------------
     @property
+    def start_ned(self) -> tuple[float, float, float]:
+        """Where the vehicle starts, on the ground (a capture scene says; procedural scenes start at the origin)."""
+        return (0.0, 0.0, 0.0)
+
+    @property
     def wall_x(self) -> float:
         return self.wall.distance
 

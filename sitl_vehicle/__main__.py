@@ -30,6 +30,7 @@ examples:
   flowgap-vehicle                                 # real time, default ports
   flowgap-vehicle --speed 4 --no-noise            # 4x real time with exact-truth telemetry
   flowgap-vehicle --scene window1_brick --result runs/verdict.json
+  flowgap-vehicle --scene room.capture.json       # a placed 3DGS capture: starts at its start_ned
   flowgap-vehicle --param MIS_TAKEOFF_ALT=1.5 --param COM_OBL_RC_ACT=4
 """
 
@@ -89,10 +90,15 @@ def build_parser() -> argparse.ArgumentParser:
                           "channel and heartbeats the GCS link once a second")
     sim.add_argument("--no-noise", action="store_true", help="exact-truth sensors and estimate (for tests)")
     sim.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
-    sim.add_argument("--start", type=triple_arg, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
-                     help="start position NED in metres (default 0,0,0: on the ground at the origin)")
-    sim.add_argument("--yaw", type=float, default=0.0, help="start heading in degrees (default 0: north)")
-    sim.add_argument("--scene", help="scene name or path: load its collision geometry (default: ground only)")
+    sim.add_argument("--start", type=triple_arg, default=None, metavar="X,Y,Z",
+                     help="start position NED in metres (default: the scene's start_ned, else 0,0,0: on the ground "
+                          "at the origin)")
+    sim.add_argument("--start-yaw", "--yaw", dest="start_yaw", type=float, default=None, metavar="DEG",
+                     help="start heading in degrees clockwise from north (default: the scene's start_yaw_deg, else "
+                          "0: north)")
+    sim.add_argument("--scene", help="scene name, spec .json or capture scene .json: load its collision geometry "
+                                     "(a capture's: the distance field of its splats, cached beside it) and judge "
+                                     "the flight through its opening or gate (default: ground only)")
     sim.add_argument("--wind", type=wind_arg, default=None, metavar="MEAN,GUST[,FROM_DEG]",
                      help="steady wind of MEAN m/s from FROM_DEG (clockwise from north; drawn from --seed when "
                           "left out) with gusts of GUST m/s standard deviation (first-order Gauss-Markov, 2 s), "
@@ -125,7 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def config_from_args(args: argparse.Namespace) -> ServerConfig:
+def config_from_args(args: argparse.Namespace, scene_start=((0.0, 0.0, 0.0), 0.0)) -> ServerConfig:
+    """The server's configuration; ``scene_start`` (position, yaw in degrees) fills --start and --start-yaw."""
     if not args.speed > 0 or not math.isfinite(args.speed):
         raise CliError(f"--speed must be a positive number, got {args.speed}")
     if not 0 <= args.instance < 100:
@@ -145,7 +152,8 @@ def config_from_args(args: argparse.Namespace) -> ServerConfig:
         api_remote=args.api_remote or ("127.0.0.1", 14540 + n),
         truth_remote=args.truth_remote or ("127.0.0.1", 14560 + n),
         truth_hz=args.truth_hz, speed=args.speed, seed=args.seed,
-        start_position=args.start, start_yaw=math.radians(args.yaw), home=home,
+        start_position=args.start if args.start is not None else tuple(scene_start[0]),
+        start_yaw=math.radians(args.start_yaw if args.start_yaw is not None else scene_start[1]), home=home,
         params=tuple(args.param), scene=args.scene, lockstep=args.lockstep, signing_key=args.signing_key,
     )
 
@@ -154,6 +162,28 @@ def _replace(obj, **changes):
     import dataclasses
 
     return dataclasses.replace(obj, **changes)
+
+
+def scene_start(scene: str | None) -> tuple[tuple[float, float, float], float]:
+    """(start position NED, start heading in degrees) of a scene: a capture's start_ned and start_yaw_deg, a
+    procedural scene's origin and start_yaw_deg; the origin facing north without a scene."""
+    if scene is None:
+        return (0.0, 0.0, 0.0), 0.0
+    try:
+        from scenes.build import resolve_spec
+
+        spec = resolve_spec(scene)
+    except ImportError as exc:
+        raise CliError(f"--scene needs the scenes package, not available here ({exc})") from None
+    except (FileNotFoundError, KeyError, ValueError) as exc:
+        raise CliError(_scene_error(scene, exc)) from None
+    return tuple(spec.start_ned), float(spec.start_yaw_deg)
+
+
+def _scene_error(scene: str, exc: Exception) -> str:
+    """One line; a capture file's own messages already begin with its path."""
+    text = str(exc)
+    return text if text.startswith(str(Path(scene))) else f"cannot load scene {scene!r}: {text}"
 
 
 def load_world(scene: str | None):
@@ -166,7 +196,7 @@ def load_world(scene: str | None):
     try:
         return load_collision(scene)
     except (FileNotFoundError, KeyError, ValueError) as exc:
-        raise CliError(f"cannot load scene {scene!r}: {exc}") from None
+        raise CliError(_scene_error(scene, exc)) from None
 
 
 def _write_new_key(path: Path) -> int:
@@ -194,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
         return _write_new_key(args.new_signing_key)
     stop = threading.Event()
     try:
-        config = config_from_args(args)
+        config = config_from_args(args, scene_start(args.scene))
         server = VehicleServer(config, world=load_world(config.scene))
     except (CliError, ParameterError, PortInUseError, SigningKeyError) as exc:
         print(f"flowgap-vehicle: error: {exc}", file=sys.stderr)

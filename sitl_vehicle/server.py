@@ -84,6 +84,7 @@ class VehicleServer:
         self._thread: threading.Thread | None = None
         self._announced_crash = False
         self._announced_crossing = False
+        self._announced_gate = False
         self.wall_time_s = 0.0
         self.lockstep: LockstepHold | None = None
 
@@ -126,13 +127,12 @@ class VehicleServer:
     def verdict(self) -> dict:
         sim = self.sim
         collision = bool(sim.crashed)
-        crossed = sim.crossed_wall
         return {
             "scene": self.scene,
-            "success": crossed and not collision,
+            "success": sim.passed and not collision,
             "collision": collision,
             "crash_reason": sim.crash_reason,
-            "crossed_wall": crossed,
+            "crossed_wall": sim.crossed_wall,
             "min_clearance_m": _json_float(sim.min_clearance_m),
             "sim_time_s": round(sim.time_s, 4),
             "wall_time_s": round(self.wall_time_s, 3),
@@ -145,6 +145,7 @@ class VehicleServer:
             "wind": None if sim.wind is None else {"mean_mps": sim.wind.config.mean_mps,
                                                    "gust_mps": sim.wind.config.gust_mps,
                                                    "from_deg": round(sim.wind.from_deg, 2)},
+            "gate": sim.collision.gate_report(),
         }
 
     def write_result(self, path: Path) -> None:
@@ -171,6 +172,10 @@ class VehicleServer:
             self._announced_crossing = True
             log.info("wall crossed at t=%.2f s", sim.time_s)
             self.interface.statustext(mavlink.MAV_SEVERITY_NOTICE, "Ground truth: wall plane crossed")
+        if sim.collision.gate_crossed and not self._announced_gate:
+            self._announced_gate = True
+            log.info("gate crossed at t=%.2f s", sim.time_s)
+            self.interface.statustext(mavlink.MAV_SEVERITY_NOTICE, "Ground truth: gate crossed")
 
     def advance(self, until_s: float, max_steps: int) -> int:
         """Step physics up to ``until_s`` (at most ``max_steps``), ticking commander and truth on time."""

@@ -236,6 +236,12 @@ class VehicleSim:
         return self.collision.crossed_wall
 
     @property
+    def passed(self) -> bool:
+        """Through the opening: the gate's rectangle crossed where the world has a gate, else the wall crossed."""
+        c = self.collision
+        return c.gate_crossed if c.gate is not None else c.crossed_wall
+
+    @property
     def motor_outputs(self) -> tuple[float, float, float, float]:
         """Normalised motor states (0..1) after the motor lag."""
         m = self.dyn.motor

@@ -57,31 +57,40 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
             proc.wait()
 
 
-def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0, instance: int = 0,
+DEFAULT_ALTITUDE_M = 1.5      # the suite's openings are centred near 1.5 m up; a capture says its own
+
+
+def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: int = 0,
            flow: str = "dis:fine", detector: str = "parallax", seed: int = 0, no_noise: bool = False,
-           timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float = 1.5,
+           timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float | None = None,
            link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0,
            wind: tuple[float, ...] | None = None, yaw_deg: float | None = None,
            camera_delay_s: float = 0.0, rerun: bool = False, rerun_connect: str | None = None,
            link_faults: LinkFaults | None = None, signing_key: Path | None = None) -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json).
 
-    ``lockstep``: both processes on the vehicle's clock (``speed`` is then unused); ``latency_s``: the
+    ``scene``: a suite name, spec ``.json`` or capture scene ``.json``; ``start`` (NED, on the ground), ``yaw_deg``
+    and ``altitude`` (the companion's flight height) default to the scene's: a capture's ``start_ned``,
+    ``start_yaw_deg`` and ``altitude_m`` (its gate's height), a procedural scene's origin, ``start_yaw_deg`` and
+    1.5 m. ``lockstep``: both processes on the vehicle's clock (``speed`` is then unused); ``latency_s``: the
     companion's camera-to-setpoint latency; ``wind``: (mean m/s, gust m/s[, from deg]) on the vehicle;
-    ``yaw_deg``: the start heading (default: the scene's ``start_yaw_deg``); ``camera_delay_s``: how long after
+    ``camera_delay_s``: how long after
     exposure each camera frame reaches the companion; ``rerun``: the companion records the flight in
     ``run_dir/flight.rrd`` (``rerun_connect``: streams it to a running viewer instead); ``link_faults``: relay
     the API link through seeded faults (a seed of None: ``seed``'s), recorded in the verdict's ``link_faults``;
     ``signing_key``: a PX4 key file both processes sign with (the vehicle then drops unsigned messages)."""
-    if yaw_deg is None:
+    if start is None or yaw_deg is None or altitude is None:
         from scenes.build import resolve_spec
 
-        yaw_deg = resolve_spec(scene).start_yaw_deg
+        spec = resolve_spec(scene)
+        start = tuple(spec.start_ned) if start is None else start
+        yaw_deg = spec.start_yaw_deg if yaw_deg is None else yaw_deg
+        altitude = getattr(spec, "altitude_m", DEFAULT_ALTITUDE_M) if altitude is None else altitude
     run_dir.mkdir(parents=True, exist_ok=True)
     api, truth = 14540 + instance, 14560 + instance
     vehicle_result = run_dir / "vehicle_result.json"
     vehicle_cmd = [sys.executable, "-m", "sitl_vehicle", "--scene", scene, "--instance", str(instance),
-                   "--start=" + ",".join(f"{v:g}" for v in start), f"--yaw={yaw_deg:g}", "--speed", f"{speed:g}",
+                   "--start=" + ",".join(f"{v:g}" for v in start), f"--start-yaw={yaw_deg:g}", "--speed", f"{speed:g}",
                    "--seed", str(seed),
                    "--result", str(vehicle_result), "--log-level", "WARNING"]
     if no_noise:
@@ -155,6 +164,7 @@ def launch(scene: str, run_dir: Path, start=(0.0, 0.0, 0.0), speed: float = 1.0,
         "sim_time_s": vehicle_verdict.get("sim_time_s"),
         "wall_time_s": round(wall, 2),
         "start_ned": list(start),
+        "gate": vehicle_verdict.get("gate"),
         "start_yaw_deg": yaw_deg,
         "altitude_m": altitude,
         "flow": flow,
@@ -187,8 +197,10 @@ def describe(v: dict) -> str:
     if v["success"]:
         return (f"SUCCESS: flew through {v['scene']} in {v['servo_steps']} servo steps, min clearance "
                 f"{v['min_clearance_m']} m, {v['sim_time_s']} s simulated, {v['wall_time_s']} s wall")
+    gate = v.get("gate")
     why = v.get("crash_reason") or v.get("companion_reason") or v.get("error") or (
-        "did not cross the wall" if not v.get("crossed_wall") else "unknown")
+        "did not cross the wall" if not v.get("crossed_wall") else
+        "crossed the gate's plane outside its rectangle" if gate and not gate.get("crossed") else "unknown")
     return f"FAILED: {v['scene']}: {why}"
 
 
@@ -197,9 +209,12 @@ def main(argv: list[str] | None = None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="example: flowgap-sitl --scene window2_stone --start 0,0.3,0 "
                                        "--result runs/verdict.json")
-    p.add_argument("--scene", default="window1_brick", help="suite scene name or spec path (default %(default)s)")
-    p.add_argument("--start", type=triple_arg, default=(0.0, 0.0, 0.0), metavar="X,Y,Z",
-                   help="vehicle start position NED (default 0,0,0: on the ground, 3 m before the wall)")
+    p.add_argument("--scene", default="window1_brick",
+                   help="suite scene name, spec .json or capture scene .json (a placed 3DGS .ply; see docs/scenes.md) "
+                        "(default %(default)s)")
+    p.add_argument("--start", type=triple_arg, default=None, metavar="X,Y,Z",
+                   help="vehicle start position NED (default: the scene's start_ned; 0,0,0 for the suite: on the "
+                        "ground, 3 m before the wall)")
     p.add_argument("--speed", type=float, default=2.0, help="simulation speed-up (default 2; unused in lockstep)")
     p.add_argument("--lockstep", action="store_true",
                    help="run both processes on the vehicle's clock: the same seed gives the same flight at any "
@@ -214,8 +229,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0, help="vehicle sensor-noise (and wind) seed")
     p.add_argument("--wind", type=_wind, default=None, metavar="MEAN,GUST[,FROM_DEG]",
                    help="wind on the vehicle (flowgap-vehicle --wind), e.g. 3,1")
-    p.add_argument("--yaw", type=float, default=None, metavar="DEG",
+    p.add_argument("--start-yaw", "--yaw", dest="yaw", type=float, default=None, metavar="DEG",
                    help="start heading in degrees (default: the scene's start_yaw_deg, 0 for the suite)")
+    p.add_argument("--altitude", type=float, default=None, metavar="M",
+                   help="flight height above the floor (default: a capture's altitude_m or gate height, else "
+                        f"{DEFAULT_ALTITUDE_M:g})")
     p.add_argument("--camera-delay", type=float, default=0.0, metavar="S",
                    help="camera frames reach the companion S seconds after exposure (default 0)")
     p.add_argument("--no-noise", action="store_true", help="exact-truth vehicle estimate")
@@ -255,8 +273,15 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     try:
         from scenes.build import resolve_spec
+        from scenes.capture import CaptureError, CaptureSpec
 
-        resolve_spec(args.scene)
+        if isinstance(resolve_spec(args.scene), CaptureSpec):
+            from scenes.collision import load_collision
+
+            load_collision(args.scene)     # checks the splats against the gate; the vehicle then finds it cached
+    except CaptureError as exc:
+        print(f"flowgap-sitl: error: {exc}", file=sys.stderr)
+        return 2
     except Exception as exc:  # noqa: BLE001 — unknown scene names and bad spec files: one line
         print(f"flowgap-sitl: error: scene {args.scene!r}: {exc}", file=sys.stderr)
         return 2
@@ -268,9 +293,11 @@ def main(argv: list[str] | None = None) -> int:
         except RecordingError as exc:
             print(f"flowgap-sitl: error: {exc}", file=sys.stderr)
             return 2
-    run_dir = args.run_dir or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{args.scene}"
+    label = Path(args.scene).stem if args.scene.endswith(".json") else args.scene   # a path names no folder
+    run_dir = args.run_dir or Path("runs") / f"{time.strftime('%Y%m%d-%H%M%S')}-{label}"
     verdict = launch(args.scene, run_dir, args.start, args.speed, args.instance, args.flow, args.detector,
                      args.seed, args.no_noise, args.timeout, log_sink=None if args.quiet else sys.stdout,
+                     altitude=args.altitude,
                      link=args.link, lockstep=args.lockstep, latency_s=args.latency, wind=args.wind,
                      yaw_deg=args.yaw, camera_delay_s=args.camera_delay, rerun=args.rerun,
                      rerun_connect=args.rerun_connect, link_faults=link_faults, signing_key=args.signing_key)

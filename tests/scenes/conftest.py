@@ -32,3 +32,15 @@ def light_spec():
 @pytest.fixture(scope="session")
 def light_cloud(light_spec):
     return build_scene(light_spec)
+
+
+@pytest.fixture(scope="session")
+def reexpressed(tmp_path_factory, light_spec):
+    """``light_spec`` written as a third-party capture (random frame, scale 0.2-5, SH degree 3, floaters out to
+    200 m, the NED world turned by a yaw; :mod:`scenes.synthetic_capture`), with the procedural cloud to compare."""
+    import numpy as np
+
+    from scenes.synthetic_capture import write_reexpressed_capture
+
+    return write_reexpressed_capture(light_spec, tmp_path_factory.mktemp("capture"), np.random.default_rng(19),
+                                     floater_count=800, keep_procedural=True)
