@@ -21,7 +21,11 @@ With ``--link-loss``/``--link-delay``/``--link-duplicate``/``--link-reorder`` ev
 through a seeded fault relay (``tools.link_relay``), seeded from the flight's own seed, or with ``--link-seed``
 from ``default_rng([link seed, crc32(scene), start index])``; each row records what its link did
 (``link_faults``) and the summary the settings.
-Writes ``flights.json`` (rows + summary) and ``flights.md``, and prints the table.
+With ``--ray [ADDRESS]`` each flight is a Ray task on any node of a cluster (``tools.ray_sweep``,
+``tools.sweep_executors``), and rows and draws are the same as the local pool's. Each flight's row is saved as it
+ends (``OUT/results``); ``--resume`` flies only the flights missing there (``tools.sweep_results``).
+Writes ``flights.json`` (rows + summary: executor, reused, success with its 95 % Wilson interval, ...) and
+``flights.md``, and prints the table.
 """
 
 from __future__ import annotations
@@ -34,13 +38,10 @@ import sys
 import threading
 import time
 import zlib
-from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
-from tools.launch import launch
 from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
 
 log = logging.getLogger("flowgap-eval-flights")
@@ -133,6 +134,8 @@ def draw_flight(spec, seed: int, start_index: int, world: str, altitude: float =
     """One flight's conditions: start, altitude, vehicle seed, and in the hard world wind and camera delay (a
     start is redrawn, up to 20 times, until an opening lies within ``IN_VIEW_DEG`` of its heading)."""
     rng = flight_rng(seed, spec.name, start_index)
+    if getattr(spec, "kind", None) == "capture":
+        return _draw_capture_flight(spec, rng)
     hard = world == "hard"
     for _ in range(20 if hard else 1):
         (start, alt), = draw_starts(rng, 1, spec.wall.distance, altitude, HARD_LATERAL_M if hard else 0.5)
@@ -145,6 +148,18 @@ def draw_flight(spec, seed: int, start_index: int, world: str, altitude: float =
                           round(float(rng.uniform(0, HARD_WIND_MPS[1])), 2), round(float(rng.uniform(0, 360)), 1))
         flight["camera_delay_s"] = round(float(rng.uniform(*HARD_CAMERA_DELAY_S)), 3)
     return flight
+
+
+def _draw_capture_flight(spec, rng: np.random.Generator) -> dict:
+    """A capture's flight: its own start moved up to ±0.5 m across its heading, on the ground, and its altitude
+    moved up to ±0.1 m (a capture's opening is where it is: no wider draw is safe to assume)."""
+    yaw = math.radians(spec.start_yaw_deg)
+    lateral = float(rng.uniform(-0.5, 0.5))
+    x, y, _ = spec.start_ned
+    start = (round(x - lateral * math.sin(yaw), 3), round(y + lateral * math.cos(yaw), 3), 0.0)
+    altitude = round(spec.altitude_m + float(rng.uniform(-0.1, 0.1)), 3)
+    return {"start": start, "altitude": altitude, "seed": int(rng.integers(0, 2**31 - 1)), "wind": None,
+            "camera_delay_s": 0.0}
 
 
 def flight_link_faults(faults: LinkFaults | None, scene: str, start_index: int) -> LinkFaults | None:
@@ -168,7 +183,8 @@ def _opening_in_view(spec, start) -> bool:
 
 def judge(row: dict, passable: bool) -> dict:
     """``row`` with ``passable`` and its success by the rule of the module docstring."""
-    crossed = bool(row.get("crossed_wall")) and not row.get("collision")
+    gate = row.get("gate")                      # a capture: through its gate's rectangle, not just its plane
+    crossed = bool(gate["crossed"] if gate else row.get("crossed_wall")) and not row.get("collision")
     refused = bool(row.get("refused"))
     return {**row, "passable": passable, "through": crossed,
             "success": crossed if passable else (refused and not row.get("collision"))}
@@ -235,12 +251,30 @@ def markdown(rows: list[dict], summary: dict) -> str:
     lines.append(f"| **all** | {summary['flights']} | {summary['passable']} | **{summary['success']} "
                  f"({100 * (summary['success_rate'] or 0):.0f} %, 95 % CI {100 * lo:.0f}–{100 * hi:.0f} %)** | "
                  f"{summary['refused']} | {summary['collisions']} | {summary['median_servo_steps']:.0f} |")
+    if "executor" in summary:
+        lines += ["", f"Executor {summary['executor']}, rows from {len(summary['nodes'])} node(s); {summary['flown']} "
+                      f"flights flown in this run, {summary['reused']} reused from an earlier one."]
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> int:
+def summary_line(summary: dict, out: Path) -> str:
+    """The one-line human summary printed after the table."""
+    lo, hi = summary["success_interval"] or (0.0, 0.0)
+    return (f"success {summary['success']}/{summary['flights']} (95 % CI {100 * lo:.0f}–{100 * hi:.0f} %), "
+            f"collisions {summary['collisions']}, touching counted as success "
+            f"{summary['touching_counted_as_success']}; passable scenes flown through {summary['passable_through']}/"
+            f"{summary['passable']}, impassable refused {summary['impassable_refused']}/{summary['impassable']}; "
+            f"{summary['flown']} flown on {summary['executor']}, {summary['reused']} reused -> {out}/flights.json")
+
+
+def _parser() -> argparse.ArgumentParser:
+    from tools.ray_sweep import add_ray_argument
+
     p = argparse.ArgumentParser(prog="flowgap-eval-flights", description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+                                formatter_class=argparse.RawDescriptionHelpFormatter,
+                                epilog="examples: flowgap-eval-flights --random 100 --starts 1 --seed 8 -o runs/r100; "
+                                       "the same on a cluster: RAY_ADDRESS=HEAD:6379 flowgap-eval-flights --ray auto "
+                                       "--random 1000 --starts 1 --seed 8 -o runs/r1000 (add --resume after a stop)")
     p.add_argument("scenes", nargs="*", help="scene names or spec paths (default: the 16-scene suite, "
                                              "unless --random is given)")
     p.add_argument("--random", type=int, default=0, metavar="N",
@@ -250,7 +284,9 @@ def main(argv: list[str] | None = None) -> int:
                         "draws the same scenes for a seed as ever")
     p.add_argument("--starts", type=int, default=3, help="randomised starts per scene (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start draws and the vehicles' noise")
-    p.add_argument("--jobs", type=int, default=2, help="flights at once (default 2)")
+    p.add_argument("--jobs", type=int, default=2,
+                   help="flights at once on this machine (default 2); with --ray local, the local Ray gets "
+                        "JOBS x --cpus-per-flight CPUs; on a cluster, the cluster's CPUs decide")
     p.add_argument("--realtime", action="store_true",
                    help="pace each flight by the wall clock at --speed instead of lockstep (a flight's outcome then "
                         "depends on this machine's load)")
@@ -261,76 +297,128 @@ def main(argv: list[str] | None = None) -> int:
                         "costs in simulated time)")
     p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"])
-    p.add_argument("-o", "--out", type=Path, default=Path("runs/eval_flights"), help="output directory")
+    p.add_argument("-o", "--out", type=Path, default=Path("runs/eval_flights"),
+                   help="output directory (default %(default)s)")
+    p.add_argument("--resume", action="store_true",
+                   help="fly only the flights whose results (OUT/results) are missing, and merge the rest; the "
+                        "other settings must be those the saved flights were flown with")
+    add_ray_argument(p, "flight")
+    p.add_argument("--cpus-per-flight", type=float, default=2.0, metavar="N",
+                   help="with --ray: the CPUs each flight's task declares (default 2: vehicle and companion)")
     add_link_fault_arguments(p)
-    args = p.parse_args(argv)
+    return p
+
+
+def _fail(message: str) -> int:
+    print(f"flowgap-eval-flights: error: {message}", file=sys.stderr)
+    return 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     from scenes.build import resolve_spec
     from scenes.library import SUITE
 
     if args.random < 0 or args.starts <= 0 or args.jobs <= 0:
-        print("flowgap-eval-flights: error: --random must be >= 0, --starts and --jobs positive", file=sys.stderr)
-        return 2
+        return _fail("--random must be >= 0, --starts and --jobs positive")
     if not (args.speed > 0 and args.latency >= 0):
-        print("flowgap-eval-flights: error: --speed must be positive and --latency >= 0", file=sys.stderr)
-        return 2
+        return _fail("--speed must be positive and --latency >= 0")
+    if not args.cpus_per_flight > 0:
+        return _fail(f"--cpus-per-flight must be positive, got {args.cpus_per_flight}: e.g. --cpus-per-flight 2")
     try:
         link_faults = link_faults_from_args(args)
     except LinkFaultError as exc:
-        print(f"flowgap-eval-flights: error: {exc}", file=sys.stderr)
-        return 2
+        return _fail(str(exc))
+    if args.ray is not None:
+        from tools.ray_sweep import RaySetupError, check_address, require_ray
+
+        try:
+            check_address(args.ray)
+            require_ray()
+        except RaySetupError as exc:
+            return _fail(str(exc))
     scenes = list(args.scenes) or ([] if args.random else list(SUITE))
     try:
         scenes += random_scene_files(args.random, args.seed, args.out / "scenes", args.world)
         specs = {s: resolve_spec(s) for s in scenes}
     except Exception as exc:  # noqa: BLE001 — unknown names, bad spec files: one line
-        print(f"flowgap-eval-flights: error: {exc}", file=sys.stderr)
-        return 2
-    labels = {s: specs[s].name for s in scenes}      # spec paths are reported by their scene's name
+        return _fail(str(exc))
+    return _sweep(args, scenes, specs, link_faults)
+
+
+def sweep_settings(args, link_faults: LinkFaults | None) -> dict:
+    """What a saved flight must share with a sweep that resumes it."""
+    return {"world": args.world, "seed": args.seed, "flow": args.flow, "detector": args.detector,
+            "clock": "realtime" if args.realtime else "lockstep", "speed": args.speed if args.realtime else None,
+            "latency_s": args.latency, "link_faults": None if link_faults is None else link_faults.settings()}
+
+
+def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None) -> int:
+    from contextlib import nullcontext
+
     from scenes.groundtruth import passable_openings
+    from tools.ray_sweep import RaySetupError, ray_session
+    from tools.sweep_executors import FlightFailed, FlightJob, FlightSettings, LocalFlights, RayFlights
+    from tools.sweep_results import ResumeError, SweepInterrupted, run_sweep
 
-    passable = {s: any(passable_openings(specs[s], BODY_RADIUS_M, PASS_MARGIN_M)) for s in scenes}
-    jobs = [(scene, i, draw_flight(specs[scene], args.seed, i, args.world))
+    labels = {s: specs[s].name for s in scenes}      # spec paths are reported by their scene's name
+    # a capture's gate is taken as passable: its author says the vehicle fits through it
+    passable = {labels[s]: getattr(specs[s], "kind", None) == "capture"
+                or any(passable_openings(specs[s], BODY_RADIUS_M, PASS_MARGIN_M)) for s in scenes}
+    jobs = [FlightJob(scene, labels[scene], i, draw_flight(specs[scene], args.seed, i, args.world),
+                      flight_link_faults(link_faults, labels[scene], i))
             for scene in scenes for i in range(args.starts)]
-    instances = InstancePool()
+    if len({job.key for job in jobs}) < len(jobs):
+        return _fail("two scenes share a name; give each scene once")
+    settings = FlightSettings(flow=args.flow, detector=args.detector, lockstep=not args.realtime, speed=args.speed,
+                              latency_s=args.latency)
 
-    def fly(job):
-        scene, i, flight = job
-        instance = instances.acquire()
-        try:
-            v = launch(scene, args.out / f"{labels[scene]}-{i}", flight["start"], args.speed, instance, args.flow,
-                       args.detector, seed=flight["seed"], images=False, log_sink=None, altitude=flight["altitude"],
-                       lockstep=not args.realtime, latency_s=args.latency, wind=flight["wind"],
-                       camera_delay_s=flight["camera_delay_s"],
-                       link_faults=flight_link_faults(link_faults, labels[scene], i))
-        finally:
-            instances.release(instance)
-        v["scene"] = labels[scene]
-        v["start_index"] = i
-        return judge(v, passable[scene])
+    def make_row(job: FlightJob, verdict: dict) -> dict:
+        row = {**verdict, "scene": job.label, "start_index": job.start_index, "seed": job.flight["seed"]}
+        return judge(row, passable[job.label])
 
-    t0 = time.monotonic()
-    rows = []
-    with ThreadPoolExecutor(max_workers=args.jobs) as pool:
-        futures = [pool.submit(fly, job) for job in jobs]
-        for future in tqdm(as_completed(futures), total=len(futures), desc="flights", unit="flight"):
-            rows.append(future.result())
-    rows.sort(key=lambda r: (r["scene"], r["run_dir"]))
+    args.out.mkdir(parents=True, exist_ok=True)
+    ray_info: dict = {}
+    try:
+        session = (nullcontext({}) if args.ray is None
+                   else ray_session(args.ray, args.jobs * args.cpus_per_flight if args.ray == "local" else None))
+        with session as ray_info:
+            executor = (LocalFlights(settings, args.out, args.jobs) if args.ray is None
+                        else RayFlights(settings, args.out, args.cpus_per_flight))
+            t0 = time.monotonic()
+            outcome = run_sweep(jobs, executor, make_row, args.out, sweep_settings(args, link_faults), args.resume)
+            wall_s = time.monotonic() - t0
+    except (RaySetupError, ResumeError) as exc:
+        return _fail(str(exc))
+    except SweepInterrupted as exc:
+        print(f"flowgap-eval-flights: {exc}", file=sys.stderr)
+        return 130
+    except FlightFailed as exc:
+        print(f"flowgap-eval-flights: error: a flight raised ({exc}); fix it and rerun with --resume to fly the "
+              f"rest", file=sys.stderr)
+        return 1
+    rows = sorted(outcome.rows, key=lambda r: (r["scene"], r["start_index"]))
     summary = summarise(rows)
     summary.update(world=args.world, flow=args.flow, detector=args.detector,
                    clock="realtime" if args.realtime else "lockstep",
                    speed=args.speed if args.realtime else None, latency_s=args.latency, seed=args.seed,
-                   starts_per_scene=args.starts, total_wall_s=round(time.monotonic() - t0, 1),
-                   link_faults=None if link_faults is None else link_faults.settings())
-    args.out.mkdir(parents=True, exist_ok=True)
+                   starts_per_scene=args.starts, total_wall_s=round(wall_s, 1),
+                   link_faults=None if link_faults is None else link_faults.settings(),
+                   executor=executor.name, reused=outcome.reused, flown=outcome.flown,
+                   flights_per_hour=round(3600 * outcome.flown / wall_s, 1) if outcome.flown and wall_s else None,
+                   nodes=sorted({str(r.get("node")) for r in rows}),
+                   ray=({**ray_info, "cpus_per_flight": args.cpus_per_flight} if args.ray is not None else None))
     (args.out / "flights.json").write_text(json.dumps({"summary": summary, "rows": rows}, indent=2) + "\n")
     table = markdown(rows, summary)
     (args.out / "flights.md").write_text(table)
     print(table)
-    print(f"success {summary['success']}/{summary['flights']}, collisions {summary['collisions']}, "
-          f"touching counted as success {summary['touching_counted_as_success']}; passable scenes flown through "
-          f"{summary['passable_through']}/{summary['passable']}, impassable refused "
-          f"{summary['impassable_refused']}/{summary['impassable']} -> {args.out}/flights.json")
+    print(summary_line(summary, args.out))
+    if outcome.missing:
+        print(f"flowgap-eval-flights: {len(outcome.missing)} flights were stopped before they ended "
+              f"({', '.join(outcome.missing[:3])}{', ...' if len(outcome.missing) > 3 else ''}): rerun with --resume "
+              f"to fly them", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -12,6 +12,8 @@ over the ground truth: green = truth only, red = detection only, yellow = both, 
 
 Ground truth comes from ``scenes.groundtruth``: the gap mask is frame 1's label image (pixels showing what
 lies beyond the wall); the ``groundtruth`` backend is its occlusion-checked exact flow.
+
+With ``--ray [ADDRESS]`` each scene's pairs are one Ray task on any node of a cluster (``tools.eval_masks_ray``).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -243,69 +246,93 @@ def label(tile: np.ndarray, text: str) -> np.ndarray:
 # main
 # ------------------------------------------------------------------------------------------------------------
 
-def evaluate(scenes_list, viewpoints, backend_specs, detectors, *, raft_weights=None, raft_iters=None,
-             threads=2, montage_backend="dis:medium", montage_view=None, progress=True):
-    """Run the evaluation; returns (rows, skipped backends, montage rows).  ``viewpoints``: a list, or a
-    function of a scene's spec that gives its list."""
-    from tqdm import tqdm
+def scene_viewpoints(spec, quick: bool = False) -> list[Viewpoint]:
+    """A scene's viewpoints: the suite's absolute ones for a suite scene, else placed before its opening."""
+    from scenes.library import SUITE
 
+    return make_viewpoints(quick, None if spec is None or spec.name in SUITE else spec)
+
+
+def evaluate_scene(scene, views_of, backends: dict, backend_specs, detectors, *, montage_backend="dis:medium",
+                   montage_view=None, on_pair=None):
+    """One scene's viewpoint pairs through every backend and detector: (rows, montage tile or None).
+    ``views_of(spec)`` gives its viewpoints; ``on_pair(n)`` is called after each of its ``n`` pairs (progress)."""
     from companion.flow.colour import flow_to_colour
     from scenes.build import load_scene
     from scenes.camera import PinholeCamera, Pose
     from scenes.render import render_splats
 
     camera = PinholeCamera()
+    spec, cloud = load_scene(scene)
+    name = spec.name if spec is not None else str(scene)     # spec paths are reported by their scene's name
+    views = views_of(spec)
+    montage_view = montage_view or views[len(views) // 2].name
+    backends = dict(backends)
+    if any(parse_backend(b)[0] == "groundtruth" for b in backend_specs):
+        from companion.flow.groundtruth import GroundTruthBackend
+
+        backends["groundtruth"] = GroundTruthBackend(spec, camera)
+    rows, tile_row = [], None
+    for vp in views:
+        pose1 = Pose(vp.position)
+        pose2 = Pose(tuple(p + d for p, d in zip(vp.position, vp.motion, strict=True)))
+        r1 = render_splats(cloud, camera, pose1)
+        r2 = render_splats(cloud, camera, pose2)
+        truth = gt_mask(cloud, camera, pose1, r1)
+        truth_c = centroid(truth)
+        tiles = None
+        for bname, backend in backends.items():
+            if bname == "groundtruth":
+                backend.set_poses(pose1, pose2, renders=(r1, r2))
+            if hasattr(backend, "reset"):
+                backend.reset()
+            t0 = time.perf_counter()
+            flow = backend.estimate(r1.rgb, r2.rgb)
+            flow_ms = 1e3 * (time.perf_counter() - t0)
+            flow = np.nan_to_num(flow, nan=0.0)
+            if bname == montage_backend and vp.name == montage_view:
+                tiles = [label(r1.rgb, f"{name} {vp.name}"), label(flow_to_colour(flow), bname)]
+            for dname in detectors:
+                t0 = time.perf_counter()
+                det = run_detector(dname, flow, camera, pose1, pose2)
+                det_ms = 1e3 * (time.perf_counter() - t0)
+                err = (None if det.centroid is None or truth_c is None
+                       else float(np.hypot(det.centroid[0] - truth_c[0], det.centroid[1] - truth_c[1])))
+                rows.append({"scene": name, "viewpoint": vp.name, "backend": bname, "detector": dname,
+                             "iou": iou(det.mask, truth), "centroid_err_px": err, "detected": det.found,
+                             "ms": flow_ms + det_ms, "flow_ms": flow_ms, "detect_ms": det_ms,
+                             "truth_area_px": int(truth.sum()), "reason": det.reason})
+                if tiles is not None and len(tiles) < 2 + len(detectors):
+                    tiles.append(label(overlay(r1.rgb, truth, det), f"{dname} IoU {rows[-1]['iou']:.2f}"))
+        if tiles is not None:
+            tile_row = np.concatenate(tiles, axis=1)
+        if on_pair is not None:
+            on_pair(len(views))
+    return rows, tile_row
+
+
+def evaluate(scenes_list, viewpoints, backend_specs, detectors, *, raft_weights=None, raft_iters=None,
+             threads=2, montage_backend="dis:medium", montage_view=None, progress=True):
+    """Run the evaluation on this machine; returns (rows, skipped backends, montage rows).  ``viewpoints``: a
+    list, or a function of a scene's spec that gives its list."""
+    from tqdm import tqdm
+
     backends, skipped = build_backends(backend_specs, raft_weights, raft_iters, threads)
     views_of = viewpoints if callable(viewpoints) else (lambda spec: viewpoints)
     rows, montage = [], []
-    bar = None
-    for scene in scenes_list:
-        spec, cloud = load_scene(scene)
-        name = spec.name if spec is not None else str(scene)     # spec paths are reported by their scene's name
-        views = views_of(spec)
-        if bar is None:
-            bar = tqdm(total=len(scenes_list) * len(views), desc="pairs", disable=not progress, unit="pair")
-            montage_view = montage_view or views[len(views) // 2].name
-        if any(parse_backend(b)[0] == "groundtruth" for b in backend_specs):
-            from companion.flow.groundtruth import GroundTruthBackend
-
-            backends["groundtruth"] = GroundTruthBackend(spec, camera)
-        for vp in views:
-            pose1 = Pose(vp.position)
-            pose2 = Pose(tuple(p + d for p, d in zip(vp.position, vp.motion, strict=True)))
-            r1 = render_splats(cloud, camera, pose1)
-            r2 = render_splats(cloud, camera, pose2)
-            truth = gt_mask(cloud, camera, pose1, r1)
-            truth_c = centroid(truth)
-            tiles = None
-            for bname, backend in backends.items():
-                if bname == "groundtruth":
-                    backend.set_poses(pose1, pose2, renders=(r1, r2))
-                if hasattr(backend, "reset"):
-                    backend.reset()
-                t0 = time.perf_counter()
-                flow = backend.estimate(r1.rgb, r2.rgb)
-                flow_ms = 1e3 * (time.perf_counter() - t0)
-                flow = np.nan_to_num(flow, nan=0.0)
-                if bname == montage_backend and vp.name == montage_view:
-                    tiles = [label(r1.rgb, f"{name} {vp.name}"), label(flow_to_colour(flow), bname)]
-                for dname in detectors:
-                    t0 = time.perf_counter()
-                    det = run_detector(dname, flow, camera, pose1, pose2)
-                    det_ms = 1e3 * (time.perf_counter() - t0)
-                    err = (None if det.centroid is None or truth_c is None
-                           else float(np.hypot(det.centroid[0] - truth_c[0], det.centroid[1] - truth_c[1])))
-                    rows.append({"scene": name, "viewpoint": vp.name, "backend": bname, "detector": dname,
-                                 "iou": iou(det.mask, truth), "centroid_err_px": err, "detected": det.found,
-                                 "ms": flow_ms + det_ms, "flow_ms": flow_ms, "detect_ms": det_ms,
-                                 "truth_area_px": int(truth.sum()), "reason": det.reason})
-                    if tiles is not None and len(tiles) < 2 + len(detectors):
-                        tiles.append(label(overlay(r1.rgb, truth, det), f"{dname} IoU {rows[-1]['iou']:.2f}"))
-            if tiles is not None:
-                montage.append(np.concatenate(tiles, axis=1))
+    with tqdm(total=None, desc="pairs", disable=not progress, unit="pair") as bar:
+        def on_pair(n_views: int) -> None:
+            if bar.total is None:
+                bar.total = len(scenes_list) * n_views
             bar.update(1)
-    if bar is not None:
-        bar.close()
+
+        for scene in scenes_list:
+            scene_rows, tile = evaluate_scene(scene, views_of, backends, backend_specs, detectors,
+                                              montage_backend=montage_backend, montage_view=montage_view,
+                                              on_pair=on_pair)
+            rows += scene_rows
+            if tile is not None:
+                montage.append(tile)
     return rows, skipped, montage
 
 
@@ -339,6 +366,9 @@ def main(argv: list[str] | None = None) -> int:
                         default=Path("runs/eval_masks"),
                         help="output folder (default: %(default)s)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from tools.ray_sweep import add_ray_argument
+
+    add_ray_argument(parser, "scene's mask pairs (with --threads CPUs)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     cv2.setNumThreads(args.threads)
@@ -348,22 +378,34 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError as exc:
         print(f"flowgap-eval-masks: the scenes package is not available ({exc})", file=sys.stderr)
         return 2
-    if args.random < 0:
-        print("flowgap-eval-masks: error: --random must be >= 0", file=sys.stderr)
+    if args.random < 0 or args.threads <= 0:
+        print("flowgap-eval-masks: error: --random must be >= 0 and --threads positive", file=sys.stderr)
         return 2
     from tools.eval_flights import random_scene_files
+    from tools.ray_sweep import RaySetupError, TaskFailed, ray_session, require_ray
 
     scenes_list = list(args.scenes or ([] if args.random else SUITE))
     scenes_list += random_scene_files(args.random, args.seed, args.out_dir / "scenes")
-    suite = set(SUITE)
-
-    def viewpoints(spec):
-        return make_viewpoints(args.quick, None if spec.name in suite else spec)
     t0 = time.perf_counter()
-    rows, skipped, montage = evaluate(scenes_list, viewpoints, args.backends, args.detectors,
-                                      raft_weights=args.raft_weights, raft_iters=args.raft_iters,
-                                      threads=args.threads, montage_backend=args.montage_backend,
-                                      progress=not args.no_progress)
+    nodes = None
+    if args.ray is None:
+        rows, skipped, montage = evaluate(scenes_list, partial(scene_viewpoints, quick=args.quick), args.backends,
+                                          args.detectors, raft_weights=args.raft_weights,
+                                          raft_iters=args.raft_iters, threads=args.threads,
+                                          montage_backend=args.montage_backend, progress=not args.no_progress)
+    else:
+        from tools.eval_masks_ray import evaluate_on_ray
+
+        try:
+            require_ray()
+            with ray_session(args.ray):
+                rows, skipped, montage, nodes = evaluate_on_ray(
+                    scenes_list, args.quick, args.backends, args.detectors, raft_weights=args.raft_weights,
+                    raft_iters=args.raft_iters, threads=args.threads, montage_backend=args.montage_backend,
+                    progress=not args.no_progress)
+        except (RaySetupError, TaskFailed) as exc:
+            print(f"flowgap-eval-masks: error: {exc}", file=sys.stderr)
+            return 2 if isinstance(exc, RaySetupError) else 1
     if not rows:
         print("flowgap-eval-masks: no backend could run: " + "; ".join(f"{k}: {v}" for k, v in skipped.items()),
               file=sys.stderr)
@@ -374,6 +416,7 @@ def main(argv: list[str] | None = None) -> int:
     meta = {"scenes": scenes_list, "random": args.random, "seed": args.seed,
             "viewpoints": [vp.__dict__ for vp in make_viewpoints(args.quick)], "backends": args.backends,
             "detectors": args.detectors, "skipped_backends": skipped, "seconds": time.perf_counter() - t0,
+            "executor": "local" if args.ray is None else "ray", "nodes": nodes,
             "ground_truth": "scenes.groundtruth (label image of frame 1; occlusion-checked depth flow)"}
     (args.out_dir / "eval_masks.json").write_text(json.dumps(
         {"meta": meta, "summary": summary, "goals": goals, "rows": rows}, indent=1) + "\n")

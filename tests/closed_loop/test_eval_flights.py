@@ -71,3 +71,36 @@ def test_two_sweeps_on_one_machine_never_share_an_instance():
         busy.close()
     first.release(a[0])
     assert second.acquire() == a[0]                        # released, it is free again
+
+
+def test_the_summary_says_where_the_flights_flew_and_how_many_were_reused(tmp_path):
+    from tools.eval_flights import summary_line
+
+    rows = [{"scene": "a", "success": True, "collision": False, "servo_steps": 10, "sim_time_s": 20,
+             "wall_time_s": 9, "node": n} for n in ("n1", "n2", "n1")]
+    s = summarise(rows)
+    s.update(executor="ray", flown=2, reused=1, nodes=["n1", "n2"])
+    assert "Executor ray, rows from 2 node(s); 2 flights flown in this run, 1 reused" in markdown(rows, s)
+    line = summary_line(s, tmp_path)
+    assert line.startswith("success 3/3 (95 % CI 44–100 %)") and "2 flown on ray, 1 reused" in line
+
+
+def test_a_capture_is_flown_from_its_own_start_and_judged_by_its_gate():
+    import math
+    from types import SimpleNamespace
+
+    from tools.eval_flights import draw_flight, judge
+
+    capture = SimpleNamespace(kind="capture", name="room", start_ned=(4.0, -2.0, 0.0), start_yaw_deg=90.0,
+                              altitude_m=1.3)
+    flights = [draw_flight(capture, 3, i, "standard") for i in range(20)]
+    assert flights[0] == draw_flight(capture, 3, 0, "standard")                 # (seed, scene, start) only
+    for f in flights:
+        x, y, z = f["start"]
+        # facing east (90 deg): "across the heading" is north-south, so only x moves, by at most 0.5 m
+        assert abs(y + 2.0) < 1e-9 and abs(x - 4.0) <= 0.5 and z == 0.0
+        assert abs(f["altitude"] - 1.3) <= 0.1 + 1e-9 and f["wind"] is None
+    assert len({f["start"] for f in flights}) > 10 and math.isfinite(flights[0]["seed"])
+    beside = {"crossed_wall": True, "collision": False, "gate": {"crossed": False}}
+    through = {"crossed_wall": True, "collision": False, "gate": {"crossed": True}}
+    assert not judge(beside, True)["success"] and judge(through, True)["success"]

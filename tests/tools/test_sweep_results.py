@@ -1,0 +1,148 @@
+"""A sweep's result files and resumption, with an executor that flies nothing; and the one-line errors of
+``--ray``/``--resume``. (The same on real flights and a local Ray: test_ray_sweeps.py.)"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from tools.sweep_results import ResumeError, SweepInterrupted, load_results, run_sweep
+
+SETTINGS = {"world": "standard", "seed": 0, "flow": "dis:fine", "link_faults": None}
+
+
+@dataclass(frozen=True)
+class Job:
+    key: str
+
+
+class FakeFlights:
+    """Flies every job at once; raises KeyboardInterrupt (a Ctrl-C) after ``stop_after`` of them."""
+
+    def __init__(self, stop_after: int | None = None, interrupted: frozenset = frozenset()) -> None:
+        self.stop_after, self.interrupted, self.flown = stop_after, interrupted, []
+
+    def run(self, jobs):
+        for job in jobs:
+            if self.stop_after is not None and len(self.flown) == self.stop_after:
+                raise KeyboardInterrupt
+            self.flown.append(job.key)
+            yield job, ({"error": "interrupted (Ctrl-C): both processes were stopped"} if job.key in self.interrupted
+                        else {"success": True})
+
+
+def make_row(job, verdict) -> dict:
+    return {"key": job.key, **verdict}
+
+
+JOBS = [Job(f"scene-{i}") for i in range(5)]
+
+
+def test_a_stopped_sweep_resumed_flies_only_what_is_missing(tmp_path):
+    first = FakeFlights(stop_after=2)
+    with pytest.raises(SweepInterrupted) as stop:
+        run_sweep(JOBS, first, make_row, tmp_path, SETTINGS, progress=False)
+    assert (stop.value.saved, stop.value.missing) == (2, 3) and "--resume" in str(stop.value)
+    assert sorted(p.name for p in (tmp_path / "results").glob("*")) == ["scene-0.json", "scene-1.json"]
+    second = FakeFlights()
+    outcome = run_sweep(JOBS, second, make_row, tmp_path, SETTINGS, resume=True, progress=False)
+    assert second.flown == ["scene-2", "scene-3", "scene-4"]
+    assert (outcome.reused, outcome.flown) == (2, 3)
+    assert [r["key"] for r in outcome.rows] == [j.key for j in JOBS]            # in the jobs' order
+    again = FakeFlights()
+    assert run_sweep(JOBS, again, make_row, tmp_path, SETTINGS, resume=True, progress=False).reused == 5
+    assert again.flown == []
+
+
+def test_without_resume_an_earlier_sweeps_results_are_cleared_and_flown_again(tmp_path):
+    run_sweep(JOBS[:3], FakeFlights(), make_row, tmp_path, SETTINGS, progress=False)
+    flights = FakeFlights()
+    outcome = run_sweep(JOBS[1:2], flights, make_row, tmp_path, SETTINGS, progress=False)
+    assert flights.flown == ["scene-1"] and outcome.reused == 0
+    assert [p.name for p in (tmp_path / "results").glob("*.json")] == ["scene-1.json"]
+
+
+def test_a_flight_stopped_by_a_ctrl_c_is_no_result(tmp_path):
+    outcome = run_sweep(JOBS[:3], FakeFlights(interrupted=frozenset({"scene-1"})), make_row, tmp_path, SETTINGS,
+                        progress=False)
+    assert [r["key"] for r in outcome.rows] == ["scene-0", "scene-2"] and outcome.missing == ["scene-1"]
+    assert not (tmp_path / "results" / "scene-1.json").exists()
+    flights = FakeFlights()
+    run_sweep(JOBS[:3], flights, make_row, tmp_path, SETTINGS, resume=True, progress=False)
+    assert flights.flown == ["scene-1"]
+
+
+def test_a_result_flown_with_other_settings_is_not_merged(tmp_path):
+    run_sweep(JOBS[:2], FakeFlights(), make_row, tmp_path, SETTINGS, progress=False)
+    with pytest.raises(ResumeError, match=r"scene-0\.json was flown with flow 'dis:fine', this sweep has 'raft'"):
+        load_results(tmp_path, [j.key for j in JOBS], {**SETTINGS, "flow": "raft"})
+    (tmp_path / "results" / "scene-1.json").write_text("{cut short")               # unreadable: missing
+    assert set(load_results(tmp_path, [j.key for j in JOBS], SETTINGS)) == {"scene-0"}
+
+
+def _without_ray(monkeypatch) -> None:
+    """As if Ray were not installed."""
+    import importlib.util
+
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "ray" else real_find_spec(name, *a))
+
+
+def test_the_eval_flights_arguments_for_ray_and_resume_are_one_line_errors(tmp_path, capsys, monkeypatch):
+    from tools.eval_flights import main
+
+    assert main(["window1_brick", "--cpus-per-flight", "0", "--out", str(tmp_path)]) == 2
+    assert main(["--ray", "window1_brick", "--out", str(tmp_path)]) == 2
+    _without_ray(monkeypatch)
+    assert main(["window1_brick", "--ray", "local", "--out", str(tmp_path)]) == 2
+    monkeypatch.undo()
+    saved = tmp_path / "results" / "window1_brick-0.json"
+    saved.parent.mkdir(parents=True)
+    saved.write_text(json.dumps({"sweep": {"flow": "raft"}, "row": {}}))
+    assert main(["window1_brick", "--starts", "1", "--resume", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 4 and all(line.startswith("flowgap-eval-flights: error:") for line in err)
+    assert "--cpus-per-flight" in err[0] and "a scene name goes before --ray" in err[1]
+    assert "pip install -e '.[ray]'" in err[2]
+    assert "was flown with" in err[3] and "--resume" in err[3]
+
+
+def test_eval_masks_says_how_to_install_ray(tmp_path, capsys, monkeypatch):
+    from tools.eval_masks import main
+
+    _without_ray(monkeypatch)
+    assert main(["--quick", "--scenes", "window1_brick", "--ray", "--out", str(tmp_path), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["flowgap-eval-masks: error: --ray needs Ray, which is not installed: pip install -e '.[ray]'"]
+
+
+def test_a_ray_task_run_directory_comes_back_where_the_local_pool_writes_it(tmp_path):
+    from tools.sweep_executors import pack_dir, relocate, unpack_dir
+
+    worker = tmp_path / "worker" / "scene-0"
+    (worker / "companion").mkdir(parents=True)
+    (worker / "companion" / "summary.json").write_text("{}")
+    here = tmp_path / "out" / "scene-0"
+    unpack_dir(pack_dir(worker), here)
+    assert (here / "companion" / "summary.json").read_text() == "{}"
+    moved = relocate({"run_dir": str(worker), "storyboard": str(worker / "companion" / "storyboard.png"),
+                      "scene": "scene"}, here)
+    assert moved == {"run_dir": str(here), "storyboard": str(here / "companion" / "storyboard.png"), "scene": "scene"}
+
+
+def test_scene_files_travel_by_value_and_suite_scenes_by_name(tmp_path):
+    from tools.ray_sweep import materialise_scene, scene_payload
+
+    spec = tmp_path / "driver" / "random_1.json"
+    spec.parent.mkdir()
+    spec.write_text('{"name": "random_1"}')
+    assert scene_payload("window1_brick") == {}
+    payload = scene_payload(str(spec))
+    assert payload == {"random_1.json": b'{"name": "random_1"}'}
+    assert materialise_scene("window1_brick", {}, tmp_path / "w") == "window1_brick"
+    written = Path(materialise_scene(str(spec), payload, tmp_path / "worker"))
+    assert written.parent == tmp_path / "worker" and written.read_bytes() == spec.read_bytes()
