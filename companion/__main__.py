@@ -27,7 +27,8 @@ examples:
   flowgap-companion --connect serial:///dev/ttyUSB0:921600 ... # a real PX4 (needs a real camera source)
 
 exit status: 0 the mission completed (the vehicle's own verdict says whether it got through), 1 the mission
-failed (lost link, refused command, no gap), 2 bad input.
+failed (lost link, refused command) or declined to fly through (an opening too small, none seen),
+2 bad input.
 """
 
 

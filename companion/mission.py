@@ -3,8 +3,9 @@
 Each servo step (docs/design.md steps 1–8): move to the waypoint and wait for arrival, take a frame, compute
 flow against the previous frame, detect the gap, filter the centroid (τ_c), and derive the next waypoint.
 When centred and close, or when the step budget is spent, push through in 0.05 m increments (step 7).
-Every way out of the loop is a state: a lost link, a refused command, or no gap after N frames ends in
-FAILED with the reason, after asking the vehicle to hold (or land) where it can.
+Every way out of the loop is a state: a lost link or a refused command ends in FAILED with the reason, after
+asking the vehicle to hold (or land) where it can; declining to fly through (an opening too small, one it cannot
+centre on, or none seen in N frames) ends in REFUSED, holding where it is.
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ class MissionConfig:
     settle_timeout_s: float = 1.5   # vehicle still braking is pitched 10°+ (measured), which blurs parallax
     estimate_wait_s: float = 0.5    # for the telemetry of a frame's moment to arrive (a slow link delays it)
     estimate_max_age_s: float = 0.04  # ... to within this (position streams at 30 Hz, attitude at 50 Hz)
+    takeoff_attempts: int = 3  # arm + takeoff rounds when the vehicle disarms on the ground in between
     no_gap_limit: int = 8  # servo steps without any gap ever seen before giving up
     min_wall_measurements: int = 3  # flow-based wall distances needed before they steer the push
     finish: str = "hold"  # after the traversal: "hold" or "land"
@@ -130,11 +132,8 @@ class Mission:
             self._enter(State.PREFLIGHT)
             self.link.wait_for(lambda t: t.position is not None and t.landed is not None,
                                self.config.preflight_timeout_s, "position estimate and landed state")
-            self._enter(State.ARM)
-            self.link.arm()
-            self._enter(State.TAKEOFF)
-            home_z = self.link.telemetry.position[2]     # on the ground: a retried takeoff may ack in the climb
-            self.link.takeoff(self.config.altitude_m)
+            self.link.set_takeoff_altitude(self.config.altitude_m)
+            home_z = self._arm_and_take_off()
             self.link.wait_for(lambda t: t.position is not None
                                and abs(t.position[2] - (home_z - self.config.altitude_m)) < 0.1
                                and math.hypot(*t.velocity) < 0.2,
@@ -160,9 +159,34 @@ class Mission:
             self._refuse(str(exc))
         except LinkLost as exc:
             self._fail(f"link lost: {exc}", safe=False)
-        except (LinkError, CameraError, NoGapError) as exc:
+        except (LinkError, CameraError) as exc:
             self._fail(str(exc), safe=True)
         return self.result
+
+    def _arm_and_take_off(self) -> float:
+        """Arm, then command the takeoff; returns home's down coordinate. PX4 disarms a vehicle left armed on
+        the ground (COM_DISARM_PRFLT, 10 s): when a slow, lossy link lets that happen before the takeoff command
+        gets through, the refusal is followed by a disarmed heartbeat, and the vehicle is armed again (on the
+        ground, disarmed: nothing to lose), up to ``takeoff_attempts`` times."""
+        attempts, attempt = self.config.takeoff_attempts, 1
+        while True:
+            self._enter(State.ARM)
+            self.link.arm()
+            self._enter(State.TAKEOFF)
+            home_z = self.link.telemetry.position[2]     # on the ground: a retried takeoff may ack in the climb
+            try:
+                self.link.takeoff(self.config.altitude_m)
+                return home_z
+            except LinkLost:
+                raise
+            except LinkError as exc:
+                if attempt >= attempts or not self.link.try_wait_for(
+                        lambda t: t.armed is False and t.landed, 2.0, "a disarmed heartbeat"):
+                    raise
+                log.warning("takeoff attempt %d of %d: %s; the vehicle disarmed on the ground: arming again",
+                            attempt, attempts, exc)
+                self._event(f"takeoff refused, the vehicle disarmed on the ground: arming again ({exc})", "WARN")
+                attempt += 1
 
     # --------------------------------------------------------------------------------- servo
     def _servo(self, start):
@@ -303,7 +327,9 @@ class Mission:
                      _fmt(detection.centroid), _fmt(used), area_frac, _fmt(next_step.error),
                      measured if measured is not None else math.nan, " → push" if next_step.push else "")
             if not ever_seen and k + 1 >= self.config.no_gap_limit:
-                raise NoGapError(f"no gap found after {k + 1} frames")
+                # nothing seen to fly through: the vehicle has touched nothing and holds, as for an opening
+                # judged too small (an opening too small for the detector is the same decision, earlier)
+                raise Refusal(f"no opening found in {k + 1} frames: nothing seen to fly through")
             prev, prev_attitude, prev_position, step = frame, attitude, position, next_step
             if next_step.push:
                 break
@@ -411,13 +437,9 @@ class Mission:
                 log.error("could not command Hold after the failure: %s", exc)
 
 
-class NoGapError(RuntimeError):
-    """The detector never found a gap within the allowed number of frames."""
-
-
 class Refusal(RuntimeError):
-    """The companion declines to fly through (an opening too small, or one it cannot centre on); the reason
-    names the numbers behind the decision."""
+    """The companion declines to fly through (an opening too small, one it cannot centre on, or none seen); the
+    reason names the numbers behind the decision."""
 
 
 def _fmt(value) -> str:

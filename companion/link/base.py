@@ -188,6 +188,11 @@ class AutopilotLink(abc.ABC):
     @abc.abstractmethod
     def arm(self) -> None: ...
 
+    def set_takeoff_altitude(self, altitude_m: float) -> None:
+        """Tell the autopilot the takeoff altitude before arming (PX4: MIS_TAKEOFF_ALT, as MAVSDK's
+        set_takeoff_altitude); links whose takeoff command carries the altitude need nothing."""
+        return None
+
     @abc.abstractmethod
     def takeoff(self, altitude_m: float) -> None: ...
 

@@ -164,8 +164,10 @@ class MavsdkLink(AutopilotLink):
     def arm(self) -> None:
         self._call("arm", self._action.arm)
 
-    def takeoff(self, altitude_m: float) -> None:
+    def set_takeoff_altitude(self, altitude_m: float) -> None:
         self._call("set takeoff altitude", self._action.set_takeoff_altitude, float(altitude_m))
+
+    def takeoff(self, altitude_m: float) -> None:
         self._call("takeoff", self._action.takeoff)
 
     def start_offboard(self, position, yaw: float) -> None:

@@ -256,15 +256,19 @@ class PymavlinkLink(AutopilotLink):
     def arm(self) -> None:
         self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
 
+    def set_takeoff_altitude(self, altitude_m: float) -> None:
+        # PX4 never takes off lower than MIS_TAKEOFF_ALT ("Using minimum takeoff altitude"), and flies it when
+        # the altitude is NaN: set it before arming, as MAVSDK's set_takeoff_altitude does, so that a slow link's
+        # retries do not eat into the time PX4 waits before disarming an armed vehicle on the ground
+        if self.telemetry.autopilot != "ardupilot":
+            self.set_parameter("MIS_TAKEOFF_ALT", altitude_m)
+
     def takeoff(self, altitude_m: float) -> None:
         family = self.telemetry.autopilot
         if family == "ardupilot":
             self.set_mode("GUIDED")
             self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, altitude_m)
             return
-        # PX4 never takes off lower than MIS_TAKEOFF_ALT ("Using minimum takeoff altitude"), and flies it when
-        # the altitude is NaN: set it first, as MAVSDK's set_takeoff_altitude does
-        self.set_parameter("MIS_TAKEOFF_ALT", altitude_m)
         home = self.telemetry.home
         amsl = home[2] + altitude_m if home else math.nan
         self.command(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, amsl)

@@ -19,9 +19,10 @@ class ScriptedLink(AutopilotLink):
     name = "scripted"
 
     def __init__(self, refuse: dict[str, str] | None = None, disarm_on_setpoint: bool = False,
-                 climbs: bool = True):
+                 climbs: bool = True, disarmed_takeoffs: int = 0):
         super().__init__()
         self.refuse, self.disarm_on_setpoint, self.climbs = refuse or {}, disarm_on_setpoint, climbs
+        self.disarmed_takeoffs = disarmed_takeoffs   # takeoffs refused because the vehicle disarmed meanwhile
         self.calls: list[str] = []
         t = self.telemetry
         t.position, t.landed, t.velocity = (0.0, 0.0, 0.0), True, (0.0, 0.0, 0.0)
@@ -40,12 +41,19 @@ class ScriptedLink(AutopilotLink):
     def close(self) -> None:
         self.calls.append("close")
 
+    def set_takeoff_altitude(self, altitude_m: float) -> None:
+        self._do("takeoff altitude")
+
     def arm(self) -> None:
         self._do("arm")
         self.telemetry.armed = True
 
     def takeoff(self, altitude_m: float) -> None:
         self._do("takeoff")
+        if self.disarmed_takeoffs:
+            self.disarmed_takeoffs -= 1
+            self.telemetry.armed = False         # PX4's COM_DISARM_PRFLT ran out while the command was retried
+            raise LinkError("command 22 refused with MAV_RESULT_TEMPORARILY_REJECTED: Takeoff denied: arm first")
         if self.climbs:          # up a moment later, as the mission reads home first
             def climbed():
                 self.telemetry.position, self.telemetry.landed = (0.0, 0.0, -altitude_m), False
@@ -94,7 +102,20 @@ def test_a_refused_arm_fails_with_the_autopilots_reason_and_commands_nothing_mor
     link = ScriptedLink(refuse={"arm": "arming denied: Preflight Fail: ekf2 missing data"})
     result = _fly(tmp_path, link).result
     assert result.state is State.FAILED and result.reason == "arm: arming denied: Preflight Fail: ekf2 missing data"
-    assert link.calls == ["connect", "arm"]                  # on the ground: nothing to hold
+    assert link.calls == ["connect", "takeoff altitude", "arm"]   # on the ground: nothing to hold
+
+
+def test_the_takeoff_altitude_is_set_before_arming_and_its_silence_fails_on_the_ground(tmp_path):
+    """PX4 disarms a vehicle left armed on the ground (COM_DISARM_PRFLT): a slow link's parameter retries must
+    not run after arming, so the altitude goes first; if it cannot be set, nothing is armed."""
+    link = ScriptedLink(refuse={"takeoff altitude": "parameter MIS_TAKEOFF_ALT: no PARAM_VALUE after 10 tries"})
+    result = _fly(tmp_path, link).result
+    assert result.state is State.FAILED
+    assert result.reason == "preflight: parameter MIS_TAKEOFF_ALT: no PARAM_VALUE after 10 tries"
+    assert link.calls == ["connect", "takeoff altitude"]
+    answered = ScriptedLink(climbs=False)
+    _fly(tmp_path / "answered", answered)
+    assert answered.calls[:4] == ["connect", "takeoff altitude", "arm", "takeoff"]
 
 
 def test_a_takeoff_that_never_reaches_its_altitude_fails_and_holds(tmp_path):
@@ -116,3 +137,37 @@ def test_a_refused_hold_after_a_failure_is_logged_not_raised(tmp_path):
     link = ScriptedLink(climbs=False, refuse={"hold": "command denied"})
     result = _fly(tmp_path, link).result
     assert result.state is State.FAILED and link.calls[-1] == "hold"
+
+
+def test_no_opening_seen_in_eight_frames_is_a_refusal_that_holds(tmp_path):
+    """A wall with nothing to fly through (or an opening too small for the detector to see) is declined like an
+    opening judged too small: REFUSED with the reason, the vehicle asked to hold, nothing pushed."""
+    from companion.flow import make_flow_backend
+    from companion.gap import get_detector
+
+    link = ScriptedLink()
+    mission = Mission(link, StillCamera(), make_flow_backend("dis", preset="fast"), get_detector("parallax"),
+                      RunLog(tmp_path, images=False),
+                      config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3))
+    result = mission.run()
+    mission.runlog.close()
+    assert result.state is State.REFUSED
+    assert result.reason == "no opening found in 8 frames: nothing seen to fly through"
+    assert link.calls[-1] == "hold" and link.calls.count("setpoint") >= 8
+
+
+def test_a_vehicle_that_disarmed_on_the_ground_before_takeoff_got_through_is_armed_again(tmp_path):
+    link = ScriptedLink(climbs=False, disarmed_takeoffs=2)
+    _fly(tmp_path, link)
+    assert link.calls[:7] == ["connect", "takeoff altitude", "arm", "takeoff", "arm", "takeoff", "arm"]
+    assert link.calls[7] == "takeoff"                       # the third round gets through
+
+
+def test_rearming_is_bounded_and_a_refused_takeoff_while_armed_is_not_retried(tmp_path):
+    link = ScriptedLink(disarmed_takeoffs=5)
+    result = _fly(tmp_path, link).result
+    assert result.state is State.FAILED and result.reason.endswith("Takeoff denied: arm first")
+    assert link.calls.count("arm") == 3 and link.calls.count("takeoff") == 3
+    armed = ScriptedLink(refuse={"takeoff": "command 22 refused with MAV_RESULT_DENIED: Takeoff denied: no home"})
+    result = _fly(tmp_path / "armed", armed).result
+    assert result.state is State.FAILED and armed.calls.count("arm") == 1 and armed.calls.count("takeoff") == 1
