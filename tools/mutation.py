@@ -3,8 +3,10 @@
 Each target runs in its own staging directory (build/mutation/<target>/) holding links to the packages and
 tests and a pyproject.toml whose [tool.mutmut] names that target's files and test files; mutmut copies it all
 into mutants/ and runs pytest there.  The staging pytest config puts the staging root before tests/ on
-sys.path (pythonpath = [".", "tests"]): with the project's ["tests"] alone, ``import companion`` finds
-tests/companion/__init__.py and the editable install supplies the *unmutated* submodules.
+sys.path (pythonpath = [".", "tests"]) and a conftest.py that imports the packages before collection: pytest
+names tests/companion/test_*.py ``companion.test_*`` (tests/ has no __init__.py) and, if ``companion`` is not
+imported yet, makes tests/companion/__init__.py the ``companion`` package, whose submodules the editable
+install then takes from the *unmutated* tree.
 
 Results go to a JSON file (one entry per target, kept across runs); the markdown report is written from it
 and from the list of equivalent mutants (mutant name -> reason).  Usage::
@@ -41,7 +43,7 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "companion.servo": (["companion/servo.py"],
                         ["tests/closed_loop/test_servo.py", "tests/companion/test_opening.py"]),
     "sitl_vehicle.control": ([f"sitl_vehicle/control/{m}.py" for m in ("position", "attitude", "rate", "mixer")],
-                             ["tests/sitl_vehicle/test_control.py"]),
+                             ["tests/sitl_vehicle/test_control.py", "tests/sitl_vehicle/test_control_laws.py"]),
     "companion.motion": (["companion/motion.py"], ["tests/closed_loop/test_tracking_and_motion.py"]),
     "companion.tracking": (["companion/tracking.py"],
                            ["tests/companion/test_tracking.py", "tests/closed_loop/test_tracking_and_motion.py"]),
@@ -70,6 +72,14 @@ markers = ["slow: longer end-to-end tests", "fuzz: hypothesis fuzzing"]
 source_paths = {sources}
 only_mutate = {mutate}
 pytest_add_cli_args_test_selection = {tests}
+also_copy = ["conftest.py"]
+"""
+
+STAGING_CONFTEST = """\
+# the real packages first, before pytest makes tests/companion the 'companion' package (tools/mutation.py)
+import companion  # noqa: F401
+import scenes  # noqa: F401
+import sitl_vehicle  # noqa: F401
 """
 
 LINE = re.compile(r"^\s*(\S+): (.+)$")
@@ -86,6 +96,7 @@ def stage(target: str, build: Path) -> Path:
     sources = [p for p in PACKAGES if p != "tests"]
     (where / "pyproject.toml").write_text(STAGING_PYPROJECT.format(
         sources=json.dumps(sources), mutate=json.dumps(mutate), tests=json.dumps(tests)))
+    (where / "conftest.py").write_text(STAGING_CONFTEST)
     return where
 
 
@@ -95,7 +106,10 @@ def run_target(target: str, build: Path, max_children: int) -> dict:
     cmd = [sys.executable, "-m", "mutmut", "run", "--max-children", str(max_children)]
     log.info("%s: %s (in %s)", target, " ".join(cmd[1:]), where)
     start = time.monotonic()
-    run = subprocess.run(cmd, cwd=where, capture_output=True, text=True)
+    # one thread per library: mutmut forks per mutant, and a thread pool started before a fork hangs the child
+    env = dict(os.environ, OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               OPENBLAS_NUM_THREADS="1")
+    run = subprocess.run(cmd, cwd=where, capture_output=True, text=True, env=env)
     wall = time.monotonic() - start
     (where / "mutmut-run.log").write_text(run.stdout + run.stderr)
     if run.returncode != 0:
