@@ -106,9 +106,10 @@ def run_target(target: str, build: Path, max_children: int) -> dict:
     cmd = [sys.executable, "-m", "mutmut", "run", "--max-children", str(max_children)]
     log.info("%s: %s (in %s)", target, " ".join(cmd[1:]), where)
     start = time.monotonic()
-    # one thread per library: mutmut forks per mutant, and a thread pool started before a fork hangs the child
-    env = dict(os.environ, OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1", MKL_NUM_THREADS="1",
-               OPENBLAS_NUM_THREADS="1")
+    # mutmut forks a child per mutant: numba's GNU OpenMP layer kills a forked child with SIGTERM (mutmut's
+    # 'suspicious'), so use its fork-safe workqueue layer, and one thread per library
+    env = dict(os.environ, NUMBA_THREADING_LAYER="workqueue", OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1",
+               MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     run = subprocess.run(cmd, cwd=where, capture_output=True, text=True, env=env)
     wall = time.monotonic() - start
     (where / "mutmut-run.log").write_text(run.stdout + run.stderr)
@@ -131,23 +132,24 @@ def module_of(mutant: str) -> str:
 
 def report(results: dict, equivalent: dict[str, str]) -> str:
     rows, notes, eq_lines = [], [], []
-    head = ("| module | mutants | killed | survived | no tests | timeout | equivalent | killed % of non-equivalent |"
-            "\n|---|---|---|---|---|---|---|---|")
+    head = ("| module | mutants | killed | survived | no tests | timeout | other | equivalent | "
+            "killed % of non-equivalent |\n|---|---|---|---|---|---|---|---|---|")
     for target in TARGETS:
         entry = results.get(target)
         for path in TARGETS[target][0]:
             module = path[:-3].replace("/", ".")
             if entry is None:
-                rows.append(f"| {module} | not run yet | | | | | | |")
+                rows.append(f"| {module} | not run yet | | | | | | | |")
                 continue
             st = {k: v for k, v in entry["statuses"].items() if module_of(k) == module}
             eq = {k for k, v in st.items() if v != "killed" and k in equivalent}
             count = {s: sum(1 for k, v in st.items() if v == s and k not in eq)
                      for s in ("killed", "survived", "no tests", "timeout")}
+            count["other"] = len(st) - len(eq) - sum(count.values())   # suspicious, segfault, not checked
             judged = len(st) - len(eq)
             pct = f"{100 * (count['killed'] + count['timeout']) / judged:.1f}" if judged else "n/a"
             rows.append(f"| {module} | {len(st)} | {count['killed']} | {count['survived']} | {count['no tests']} | "
-                        f"{count['timeout']} | {len(eq)} | {pct} |")
+                        f"{count['timeout']} | {count['other']} | {len(eq)} | {pct} |")
             eq_lines += [f"- `{k}`: {equivalent[k]}" for k in sorted(eq)]
             left = sorted(k for k, v in st.items() if v not in ("killed", "timeout") and k not in eq)
             if left:
@@ -157,7 +159,16 @@ def report(results: dict, equivalent: dict[str, str]) -> str:
     out = ["# Mutation testing", "",
            "mutmut 3 over the pure-core modules, each with its own test files (`make mutation`, or "
            "`python -m tools.mutation --run TARGET`; not part of `make test`). Timeouts count as killed. "
-           "An equivalent mutant changes no observable behaviour; each is listed below with the reason.", "",
+           "'other' is mutmut's 'suspicious' (the forked test run ended by a signal, not by a test result) and the "
+           "like; they count as not killed. An equivalent mutant changes no observable behaviour; each is listed "
+           "below with the reason.", "",
+           "Each target runs in build/mutation/<target>/ (links to the code, a pytest config with the copied "
+           "code before tests/ on sys.path, and a conftest importing the packages first), because pytest names "
+           "tests/companion/test_*.py `companion.test_*` and would otherwise make tests/companion the `companion` "
+           "package, with the unmutated submodules from the editable install (checked by hand: a sign flipped in "
+           "the copy's heading_to_ned fails test_servo.py there, and passes with the project's own pytest path). "
+           "numba runs its workqueue threading layer there: its GNU OpenMP layer kills mutmut's forked children.",
+           "",
            head, *rows, "", "## Runs", "", *(runs or ["- none yet"]), "",
            "## Equivalent mutants", "", *(eq_lines or ["- none"]), "",
            "## Not killed (neither killed nor equivalent)", "", *(notes or ["- none"]), ""]

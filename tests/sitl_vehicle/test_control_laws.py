@@ -299,3 +299,236 @@ def test_constrain_xy_hand_worked():
     assert (out[0] - 3.0) * 8.0 - out[1] * -6.0 == pytest.approx(0.0, abs=1e-12) and out[1] > 0
     sx, sy = cxy((1.0, NAN), (0.0, 0.0), 5.0)
     assert sx == 1.0 and math.isnan(sy)
+
+
+def test_attitude_yaw_rate_feed_forward_adds_to_the_attitude_error_term():
+    q, qd = quat_from_euler(0.2, -0.1, 0.3), quat_from_euler(0.25, -0.05, 0.4)
+    zb = (-math.sin(-0.1), math.sin(0.2) * math.cos(-0.1), math.cos(0.2) * math.cos(-0.1))
+    ac = AttitudeControl(rate_limit=(10.0,) * 3)
+    base = ac.update(q, qd)
+    assert all(abs(c) > 0.05 for c in base)
+    assert ac.update(q, qd, 0.5) == pytest.approx(tuple(b + 0.5 * z for b, z in zip(base, zb, strict=True)), abs=1e-12)
+
+
+def test_a_new_mixer_reports_no_saturation():
+    m = Mixer(QUAD250)
+    assert m.saturation_positive == (False, False, False) and m.saturation_negative == (False, False, False)
+
+
+def _hand_allocation():
+    """Motor commands for (thrust, roll, pitch, yaw) from the hand-built effectiveness of the X layout."""
+    t, km = QUAD250.thrust_max_n, QUAD250.torque_coeff_m
+    d = QUAD250.arm_length_m * math.sqrt(0.5)
+    places = [(d, d, 1.0), (-d, -d, 1.0), (d, -d, -1.0), (-d, d, -1.0)]
+    b = np.array([[t] * 4, [-y * t for _, y, _ in places], [x * t for x, _, _ in places],
+                  [s * km * t for _, _, s in places]])
+    return b, np.linalg.inv(b)
+
+
+@pytest.mark.parametrize("motor", [0, 1, 2, 3])
+def test_one_motor_pushed_past_full_gives_way_by_thrust_keeping_the_torques(motor):
+    """Roll and pitch that ask one motor alone for more than full: thrust is reduced (never the torques) and no
+    command leaves [0, 1]."""
+    b, inv = _hand_allocation()
+    m = Mixer(QUAD250)
+    want = np.zeros(4)
+    want[motor] = 0.5              # of which roll and pitch alone give that motor +0.25 (its diagonal −0.25)
+    torque = b @ want
+    thrust = 0.8 * b[0].sum()                         # 0.8 on every motor
+    u = m.mix(thrust, (torque[1], torque[2], 0.0))
+    assert (inv @ np.array([thrust, torque[1], torque[2], 0.0]))[motor] > 1.0     # it would saturate
+    assert all(0.0 <= x <= 1.0 for x in u) and max(u) == pytest.approx(1.0)
+    got = m.effectiveness(u)
+    assert got[1:3] == pytest.approx((torque[1], torque[2]), abs=1e-9) and got[0] < thrust
+
+
+def test_yaw_that_brings_roll_and_pitch_back_in_range_is_met_exactly():
+    """Roll and pitch alone would ask motor 0 for more than full; the yaw asked at the same time lowers it:
+    the whole demand is reachable and met exactly."""
+    b, inv = _hand_allocation()
+    m = Mixer(QUAD250)
+    hover = 0.7 * b[0].sum()
+    rp = b @ np.array([0.35, -0.35, 0.0, 0.0])         # roll and pitch only: motor 0 to 1.05, motor 1 to 0.35
+    yaw = b[3] @ np.array([-0.1, -0.1, 0.1, 0.1])       # motors 0, 1 down
+    assert (inv @ np.array([hover, rp[1], rp[2], 0.0]))[0] > 1.0
+    demand = (hover, rp[1], rp[2], yaw)
+    assert all(0.0 <= x <= 1.0 for x in inv @ np.array(demand))
+    u = m.mix(hover, demand[1:])
+    assert m.effectiveness(u) == pytest.approx(demand, abs=1e-9)
+
+
+def test_low_thrust_roll_is_not_helped_by_adding_thrust():
+    m = Mixer(QUAD250)
+    u = m.mix(2.0, (0.3, 0.0, 0.0))                   # 0.1 per motor, the roll asks ±0.17: undershoot only
+    f, tx, _, _ = m.effectiveness(u)
+    assert f <= 2.0 + 1e-9 and 0.0 < tx < 0.3 and min(u) >= 0.0
+
+
+def test_a_torque_just_beyond_reach_is_flagged():
+    """At hover (0.5 on every motor) the most roll is 4·d·T·0.5; ask for 15 % more."""
+    d = QUAD250.arm_length_m * math.sqrt(0.5)
+    most = 4 * d * QUAD250.thrust_max_n * 0.5
+    m = Mixer(QUAD250)
+    m.mix(2 * QUAD250.thrust_max_n, (1.15 * most, 0.0, 0.0))
+    assert m.saturation_positive == (True, False, False)
+
+
+def test_desaturation_skips_small_components_wherever_they_are_and_scales_by_the_direction():
+    assert _desat_gain((0.1, 1.0, 1.0, 1.0), [0.5, 1.2, 0.5, 0.5]) == pytest.approx(-0.2)
+    u = [1.2, 0.5, 0.5, 0.5]
+    _desaturate(u, (1.0, 0.5, 0.5, 0.5))             # shift −0.2 along the direction: the others by −0.1
+    assert u == pytest.approx([1.0, 0.4, 0.4, 0.4])
+
+
+def _run(pc, sp, state=LEVEL, dt=0.1):
+    pc.set_state(state)
+    pc.set_input_setpoint(sp)
+    return pc.update(dt)
+
+
+@pytest.mark.parametrize("sp, state", [
+    (TrajectorySetpoint(velocity=(0.1, NAN, 0.0)), LEVEL),                                      # broken pair
+    (TrajectorySetpoint(position=(0.0, 0.0, -1.0), yaw=0.2), PositionControlStates((0.0, 0.0, NAN), (0.0,) * 3,
+                                                                                   (0.0,) * 3, 0.0)),
+    (TrajectorySetpoint(velocity=(0.0, 0.0, 0.0), yaw=0.2), PositionControlStates((0.0,) * 3, (0.0, NAN, 0.0),
+                                                                                  (0.0,) * 3, 0.0)),
+    (TrajectorySetpoint(velocity=(0.0, 0.0, 0.0), yaw=0.2), PositionControlStates((0.0,) * 3, (0.0,) * 3,
+                                                                                  (NAN, 0.0, 0.0), 0.0)),
+])
+def test_invalid_input_gives_nothing_usable(sp, state):
+    out = _run(_pc(), sp, state)
+    assert out.valid is False
+    assert all(math.isnan(c) for c in (*out.thrust, *out.acceleration, *out.velocity, out.yaw, out.yaw_rate))
+
+
+def test_valid_input_passes_yaw_through():
+    out = _run(_pc(), TrajectorySetpoint(velocity=(0.0, 0.0, 0.0), yaw=1.2, yaw_rate=0.3))
+    assert out.valid is True and out.yaw == 1.2 and out.yaw_rate == 0.3
+    state = PositionControlStates((0.0,) * 3, (0.0,) * 3, (0.0,) * 3, -0.7)
+    out = _run(_pc(), TrajectorySetpoint(velocity=(0.0, 0.0, 0.0)), state)
+    assert out.yaw == -0.7 and out.yaw_rate == 0.0       # no yaw set-point: hold the heading, no rate
+
+
+def test_position_loop_velocity_setpoint_per_axis_and_the_horizontal_limit():
+    pc = _pc()
+    pc.set_position_gains((0.5, 1.5, 2.0))
+    out = _run(pc, TrajectorySetpoint(position=(0.2, -0.4, -1.3)))
+    assert out.velocity == pytest.approx((0.5 * 0.2, 1.5 * -0.4, 2.0 * -0.3))
+    # limit 1 m/s: the position part (0, 0.8) is kept, the feed-forward (0.9, 0) adds what fits: 0.6
+    pc = _pc()
+    pc.set_position_gains((1.0, 1.0, 1.0))
+    pc.set_velocity_limits(1.0, 5.0, 5.0)
+    out = _run(pc, TrajectorySetpoint(position=(0.0, 0.8, -1.0), velocity=(0.9, 0.0, 0.0)))
+    assert out.velocity[:2] == pytest.approx((0.6, 0.8))
+    # a velocity set-point alone beyond the limit is scaled to it
+    out = _run(pc, TrajectorySetpoint(velocity=(0.0, 1.5, 0.0)))
+    assert out.velocity == pytest.approx((0.0, 1.0, 0.0))
+    out = _run(pc, TrajectorySetpoint(velocity=(-1.2, 0.9, 0.0)))
+    assert out.velocity == pytest.approx((-0.8, 0.6, 0.0))
+
+
+def test_velocity_pid_law_with_integral_and_derivative():
+    """a = Kp·e + I − Kd·dv/dt per axis, I += Ki·e·dt after each step (nothing saturated)."""
+    pc = _pc(hover=0.5)
+    kp, ki, kd = (2.0, 3.0, 4.0), (0.5, 0.7, 0.9), (0.1, 0.2, 0.3)
+    pc.set_velocity_gains(kp, ki, kd)
+    vsp = (0.3, -0.2, 0.1)
+    state = PositionControlStates((0.0,) * 3, (0.1, 0.1, -0.1), (0.2, -0.3, 0.4), 0.0)
+    e = [s - v for s, v in zip(vsp, state.velocity, strict=True)]
+    dt = 0.05
+    first = _run(pc, TrajectorySetpoint(velocity=vsp), state, dt)
+    assert first.acceleration == pytest.approx(tuple(kp[i] * e[i] - kd[i] * state.acceleration[i]
+                                                      for i in range(3)))
+    integ = tuple(ki[i] * e[i] * dt for i in range(3))
+    assert pc.integral == pytest.approx(integ)
+    second = _run(pc, TrajectorySetpoint(velocity=vsp), state, dt)
+    assert second.acceleration == pytest.approx(tuple(kp[i] * e[i] + integ[i] - kd[i] * state.acceleration[i]
+                                                       for i in range(3)))
+    assert pc.integral == pytest.approx(tuple(2 * c for c in integ))
+
+
+@pytest.mark.parametrize("vz_sp, acc_ff, frozen", [
+    (3.0, 0.0, True),            # diving: thrust at its minimum, the error asks for less still
+    (0.5, 0.0, True),            # ... a small error too (a strong gain saturates it)
+    (-3.0, 0.0, True),           # climbing: thrust past its maximum, the error asks for more
+    (0.5, -30.0, False),         # thrust at its maximum but the error asks for less: integrate
+    (0.02, 0.0, False),          # nothing saturated
+])
+def test_vertical_integrator_freezes_only_against_a_saturated_thrust(vz_sp, acc_ff, frozen):
+    pc = _pc(hover=0.5)
+    pc.set_thrust_limits(0.1, 0.9)
+    pc.set_velocity_gains((2.0, 2.0, 40.0), (0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+    out = _run(pc, TrajectorySetpoint(velocity=(0.0, 0.0, vz_sp), acceleration=(0.0, 0.0, acc_ff)), dt=0.1)
+    assert pc.integral[2] == pytest.approx(0.0 if frozen else vz_sp * 0.1)
+    assert (out.thrust[2] >= -0.1 or out.thrust[2] <= -0.9) is (abs(vz_sp) > 0.1 or acc_ff != 0.0)
+
+
+@pytest.mark.parametrize("direction", [(1.0, 0.0), (-0.6, 0.8)])
+def test_vertical_thrust_has_priority_over_horizontal(direction):
+    """Thrust at most 0.8 with 0.5 vertical: the horizontal part is cut to √(0.8² − 0.5²) in its direction."""
+    pc = _pc(hover=0.5, tilt=math.radians(80))
+    pc.set_thrust_limits(0.05, 0.8)
+    a = 1.5 * GRAVITY                                 # asks 0.75 sideways
+    out = _run(pc, TrajectorySetpoint(acceleration=(a * direction[0], a * direction[1], 0.0)))
+    xy = math.sqrt(0.8 ** 2 - 0.5 ** 2)
+    assert out.thrust == pytest.approx((xy * direction[0], xy * direction[1], -0.5), abs=1e-12)
+    # vertical demand past the maximum: nothing left for horizontal
+    out = _run(pc, TrajectorySetpoint(acceleration=(2.0, 1.0, -1.0 * GRAVITY)))
+    assert out.thrust[:2] == (0.0, 0.0) and out.thrust[2] == pytest.approx(-1.0)
+
+
+@pytest.mark.parametrize("kp", [(2.0, 2.5), (0.5, 0.0)])
+def test_horizontal_integrator_tracks_the_thrust_it_got(kp):
+    """Tracking anti-reset windup: I_xy += (e − (2/Kp_x)·(a_sp − a_produced))·Ki·dt, a_produced = T_xy·g/hover;
+    without saturation a_produced = a_sp and it is the plain I += e·Ki·dt."""
+    pc = _pc(hover=0.5, tilt=math.radians(80))
+    pc.set_thrust_limits(0.05, 0.8)
+    pc.set_velocity_gains((*kp, 4.0), (0.5, 0.5, 0.0), (0.0, 0.0, 0.0))
+    vsp = (0.2, -0.1, 0.0)
+    ff = (1.2 * GRAVITY, 0.9 * GRAVITY, 0.0)         # past what 0.8 of thrust gives sideways
+    out = _run(pc, TrajectorySetpoint(velocity=vsp, acceleration=ff), dt=0.1)
+    produced = [t * GRAVITY / 0.5 for t in out.thrust[:2]]
+    want = [(vsp[i] - 2.0 / kp[0] * (out.acceleration[i] - produced[i])) * 0.5 * 0.1 for i in range(2)]
+    assert pc.integral[:2] == pytest.approx(want, abs=1e-12)
+    assert all(abs(w - vsp[i] * 0.05) > 0.01 for i, w in enumerate(want))      # the windup term mattered
+    pc.reset_integral()
+    _run(pc, TrajectorySetpoint(velocity=vsp, acceleration=(0.1, 0.0, 0.0)), dt=0.1)
+    assert pc.integral[:2] == pytest.approx((vsp[0] * 0.05, vsp[1] * 0.05))
+
+
+def test_desaturate_second_pass_along_a_non_unit_direction():
+    u = [1.3, -0.05, 0.5, 0.5]
+    # first: k = −0.3 + 0.05/0.5 = −0.2 → (1.1, −0.15, 0.4, 0.4); then k = −0.1 + 0.15/0.5 = 0.2, half of it
+    _desaturate(u, (1.0, 0.5, 0.5, 0.5))
+    assert u == pytest.approx([1.2, -0.1, 0.45, 0.45])
+
+
+def test_no_windup_correction_without_a_proportional_gain_or_when_thrust_gives_more_than_asked():
+    vsp = (0.2, -0.1, 0.0)
+    # no P gain on x: the tracking gain 2/Kp is taken as 0, the integrator is plain even in saturation
+    pc = _pc(hover=0.5, tilt=math.radians(80))
+    pc.set_thrust_limits(0.05, 0.8)
+    pc.set_velocity_gains((0.0, 2.0, 4.0), (0.5, 0.5, 0.0), (0.0, 0.0, 0.0))
+    _run(pc, TrajectorySetpoint(velocity=vsp, acceleration=(1.2 * GRAVITY, 0.9 * GRAVITY, 0.0)), dt=0.1)
+    assert pc.integral[:2] == pytest.approx((vsp[0] * 0.05, vsp[1] * 0.05))
+    # falling faster than gravity, the thrust held at its minimum gives more sideways than asked: not a windup
+    pc = _pc(hover=0.5)
+    pc.set_thrust_limits(0.3, 0.9)
+    pc.set_velocity_gains((2.0, 2.0, 4.0), (0.5, 0.5, 0.0), (0.0, 0.0, 0.0))
+    out = _run(pc, TrajectorySetpoint(velocity=vsp, acceleration=(0.0, 0.0, 1.5 * GRAVITY)), dt=0.1)
+    produced = [t * GRAVITY / 0.5 for t in out.thrust[:2]]
+    assert math.hypot(*produced) > math.hypot(*out.acceleration[:2])
+    assert pc.integral[:2] == pytest.approx((vsp[0] * 0.05, vsp[1] * 0.05))
+
+
+def test_constrain_xy_more_hand_worked_cases():
+    cxy = PositionControl._constrain_xy
+    # v0 at the limit, v1 pointing back across: v0 is kept as it is (not mirrored to the circle's far side)
+    assert cxy((3.0, 4.0), (-30.0, 0.0), 5.0) == pytest.approx((3.0, 4.0))
+    # the sum exactly at the limit is taken as it is, even with v0 alone at the limit
+    assert cxy((5.0, 0.0), (-1.0, 3.0), 5.0) == pytest.approx((4.0, 3.0))
+    # v0 with both components: v1 along y adds until the circle, x stays 2.4
+    assert cxy((2.4, 1.8), (0.0, 10.0), 5.0) == pytest.approx((2.4, math.sqrt(25.0 - 2.4 ** 2)))
+    # a non-finite sum component is passed through at once
+    sx, sy = cxy((1.0, NAN), (0.5, 0.0), 5.0)
+    assert sx == 1.5 and math.isnan(sy)
