@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: venv test demo bench lint clean
+.PHONY: venv test demo bench lint clean mutation
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -22,6 +22,12 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m tools.bench
+
+# Mutation testing (not part of test): mutmut over the pure-core modules, report in docs/mutation.md.
+# MUTATION_TARGETS=companion.servo for one; all of them takes hours on 2 cores.
+MUTATION_TARGETS ?= all
+mutation: $(STAMP)
+	nice -n 10 $(BIN)/python -m tools.mutation --run $(MUTATION_TARGETS) -o docs/mutation.md
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -235,3 +236,218 @@ def test_an_opening_seen_at_an_angle_is_judged_at_its_width_in_the_wall():
     mask[60:180, 120:180] = True                    # 60 px wide seen at 30°: 69 px in the wall's plane
     wide, radius = in_wall(mask, 1 / math.cos(math.radians(30)))
     assert radius == pytest.approx(30 / math.cos(math.radians(30)), abs=1.0) and wide.shape == (240, 370)
+
+
+# --- the laws' edges (mutation testing, docs/mutation.md): thresholds read "at least" / "at most" ------------
+# Exact binary fractions in the configs below keep each threshold comparison exact.
+
+EXACT = ServoConfig(centred_tol=0.125, close_area_frac=0.125, push_area_frac=0.25, close_distance_m=1.5,
+                    push_distance_m=1.25, last_call_distance_m=1.0, body_radius_m=0.25, clearance_margin_m=0.125,
+                    roomy_tolerance_m=0.125, metric_gain=1.0, hold_distance_m=0.0, probe_floor_m=0.875)
+
+
+def _px(e_u: float, e_v: float) -> tuple[float, float]:
+    """The centroid whose normalised error is (e_u, e_v): u = W/2·(1 + e_u), v = H/2·(1 + e_v)."""
+    return W / 2 * (1 + e_u), H / 2 * (1 + e_v)
+
+
+@pytest.mark.parametrize("index, wall, push", [
+    (0, None, False),
+    (ServoConfig().step_budget - 2, None, False),   # one step of the budget still left
+    (ServoConfig().step_budget - 1, None, True),    # the budget's last step
+    (0, ServoConfig().last_call_distance_m, True),  # the wall at the last-call distance
+    (0, 1.2, False),
+])
+def test_without_a_centroid_the_servo_goes_straight_on_and_pushes_only_on_budget_or_the_last_call(index, wall, push):
+    step = servo_step(None, 0.5, index, W, H, wall_distance_m=wall)
+    assert step.push is push and step.close is False and step.delta_heading == (ServoConfig().forward_step_m, 0, 0)
+
+
+def test_servo_thresholds_are_inclusive():
+    cfg = EXACT
+    off = _px(0.5, 0.0)                                 # off-centre: never centred
+    assert servo_step(off, cfg.close_area_frac, 0, W, H, cfg).close            # "from which": at least
+    assert servo_step(off, 0.0, 0, W, H, cfg, wall_distance_m=cfg.close_distance_m).close
+    assert not servo_step(off, 0.0, 0, W, H, cfg, wall_distance_m=2.0).close
+    edge = _px(cfg.centred_tol, -cfg.centred_tol)         # |e| exactly the tolerance: centred
+    assert servo_step(edge, cfg.push_area_frac, 0, W, H, cfg).push
+    assert servo_step(_px(-cfg.centred_tol, cfg.centred_tol), 0.0, 0, W, H, cfg,
+                      wall_distance_m=cfg.push_distance_m).push
+    assert not servo_step(_px(0.25, 0.0), cfg.push_area_frac, 0, W, H, cfg).push
+    assert servo_step(off, 0.0, 0, W, H, cfg, wall_distance_m=cfg.last_call_distance_m).push
+
+
+def test_servo_step_reports_its_error_and_clamps_both_ways():
+    cfg = ServoConfig()
+    step = servo_step((0, 240), 0.01, 0, W, H, cfg)      # far left, far down: e = (-1, +1)
+    assert step.error == (-1.0, 1.0)
+    assert step.delta_heading[1:] == (-cfg.lateral_clamp_far_m, cfg.lateral_clamp_far_m)
+    # a third of the way to align_error: forward = δ_f·(1 − |e|/align_error)
+    e = cfg.align_error / 3
+    mid = servo_step(_px(e, 0.0), 0.01, 0, W, H, cfg)
+    assert mid.delta_heading == pytest.approx((cfg.forward_step_m * 2 / 3, cfg.kappa_y * e, 0.0))
+
+
+def test_metric_step_reports_what_it_was_given_and_clamps_both_ways():
+    from companion.servo import metric_step
+
+    cfg = ServoConfig()
+    step = metric_step((0.3, -0.1), 0.45, 3.0, 0.01, 0, cfg, error=(0.25, -0.125))
+    assert step.error == (0.25, -0.125) and step.offset_m == (0.3, -0.1) and step.close is False
+    big = metric_step((-2.0, 2.0), 0.45, 3.0, 0.01, 0, cfg)
+    assert big.delta_heading == (cfg.forward_step_m * cfg.min_forward_frac, -cfg.metric_max_step_m,
+                                 cfg.metric_max_step_m)
+
+
+def test_metric_step_thresholds_are_inclusive():
+    from companion.servo import metric_step
+
+    cfg = EXACT                                       # clear radius 0.5 m: tolerance 0.5 − 0.25 − 0.125 = 0.125
+    assert metric_step((0.0, 0.0), 0.5, 3.0, cfg.close_area_frac, 0, cfg).close
+    assert metric_step((0.0, 0.0), 0.5, cfg.close_distance_m, 0.0, 0, cfg).close
+    assert not metric_step((0.0, 0.0), 0.5, 3.0, 0.0, 0, cfg).close
+    # tolerance exactly zero still fits (0.375 = 0.25 + 0.125), seen clear this frame
+    assert metric_step((0.0, 0.0), 0.375, 3.0, 0.0, 0, cfg, clearance_here_m=0.375).aligned
+    assert metric_step((0.0, 0.0), 0.375, 3.0, 0.0, 0, cfg).aligned
+    # the offset exactly the tolerance still fits
+    assert metric_step((0.125, 0.0), 0.5, 3.0, 0.0, 0, cfg).aligned
+    # large at exactly the push area / distance: a fresh, aligned step pushes
+    assert metric_step((0.0, 0.0), 0.5, 3.0, cfg.push_area_frac, 5, cfg, clearance_here_m=0.5).push
+    assert metric_step((0.0, 0.0), 0.5, cfg.push_distance_m, 0.0, 5, cfg, clearance_here_m=0.5).push
+    # room to spare exactly the roomy tolerance: pushes on the tracked place after enough sightings
+    assert metric_step((0.0, 0.0), 0.5, 1.0, 0.5, 5, cfg, sightings=cfg.roomy_sightings).push
+    # roomy needs sightings; the default is none
+    assert not metric_step((0.0, 0.0), 0.5, 1.0, 0.5, 5, dataclasses.replace(cfg, roomy_sightings=1)).push
+
+
+def test_metric_step_budget_and_forward_step():
+    from companion.servo import metric_step
+
+    cfg = ServoConfig()
+    fresh = {"clearance_here_m": 0.45}
+    assert not metric_step((0.0, 0.0), 0.45, 3.0, 0.0, cfg.step_budget - 2, cfg, **fresh).push
+    assert metric_step((0.0, 0.0), 0.45, 3.0, 0.0, cfg.step_budget - 1, cfg, **fresh).push
+    # seen clear in this frame and large: forward by the slowdown law, not the probe's creep
+    off = (0.1, 0.0)
+    seen = metric_step(off, 0.45, 1.3, 0.5, 5, cfg, **fresh)
+    assert seen.delta_heading[0] == pytest.approx(cfg.forward_step_m * (1 - 0.1 / cfg.metric_slowdown_m))
+    assert seen.delta_heading[0] > cfg.probe_step_m
+
+
+def test_metric_step_steps_back_only_when_it_would_stand_still():
+    from companion.servo import metric_step
+
+    cfg = EXACT
+    # at exactly the probe floor, aligned but unseen: no creep, and standing still it steps back
+    assert metric_step((0.0, 0.0), 0.375, cfg.probe_floor_m, 0.5, 5, cfg).delta_heading[0] == -cfg.probe_step_m
+    # moving on normally: no step back
+    assert metric_step((0.0, 0.0), 0.5, 3.0, 0.0, 0, cfg, clearance_here_m=0.5).delta_heading[0] == \
+        cfg.forward_step_m
+    # held off the wall (not aligned, hold distance reached) but moving sideways or down: no step back
+    assert metric_step((0.0, 0.125), 0.3, 0.0, 0.0, 0, cfg).delta_heading == (0.0, 0.0, 0.125)
+    assert metric_step((0.02, 0.0), 0.3, 0.0, 0.0, 0, cfg).delta_heading == (0.0, 0.02, 0.0)
+    assert metric_step((0.0, 0.02), 0.3, 0.0, 0.0, 0, cfg).delta_heading == (0.0, 0.0, 0.02)
+    # 2 cm forward (the wall 2 cm beyond the hold distance of 0) is a move too
+    assert metric_step((0.0, 0.0), 0.3, 0.02, 0.0, 0, cfg).delta_heading[0] == 0.02
+
+
+def test_push_length_without_a_positive_wall_distance_is_the_default():
+    cfg = ServoConfig()
+    assert push_length(0.0, cfg) == cfg.push_default_m and push_length(math.inf, cfg) == cfg.push_default_m
+
+
+def test_push_waypoints_spread_the_clamped_bias_evenly_over_the_first_half():
+    cfg = ServoConfig()
+    inc, limit = cfg.push_increment_m, cfg.lateral_clamp_far_m
+    # 1 m: 20 increments, the bias in 10 equal shares; both components clamped from either side
+    for bias, end in [((-0.1, 0.1), (-limit, limit)), ((-0.03, -0.5), (-0.03, -limit))]:
+        points = push_waypoints((0.0, 0.0, 0.0), 0.0, 1.0, bias, cfg)
+        lateral = np.diff(np.array([(0.0, 0.0, 0.0)] + points), axis=0)[:, 1:]
+        assert lateral[:10] == pytest.approx(np.tile(np.array(end) / 10, (10, 1)))
+        assert lateral[10:] == pytest.approx(np.zeros((10, 2)))
+    # 0.14 m: 3 increments, the first (3 // 2 = 1) takes all the bias; 0.1 m: 2, the first again; 1 cm: one
+    three = push_waypoints((0.0, 0.0, 0.0), 0.0, 0.14, (0.04, 0.0), cfg)
+    assert np.array(three) == pytest.approx(np.array([(inc, 0.04, 0.0), (2 * inc, 0.04, 0.0), (3 * inc, 0.04, 0.0)]))
+    two = push_waypoints((0.0, 0.0, 0.0), 0.0, 0.1, (0.04, 0.0), cfg)
+    assert np.array(two) == pytest.approx(np.array([(inc, 0.04, 0.0), (2 * inc, 0.04, 0.0)]))
+    assert np.array(push_waypoints((0.0, 0.0, 0.0), 0.0, 0.01, (0.0, 0.0), cfg)) == pytest.approx(
+        np.array([(inc, 0.0, 0.0)]))
+
+
+# --- the flow readers on hand-built inverse-depth fields: ρ per pixel, flow = ρ·g, g of the translation ------
+
+def _flow_of(rho: np.ndarray, t=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """Flow of a camera translating along ``t`` (camera axes) over inverse depths ``rho`` (in steps)."""
+    h, w = rho.shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    xs, ys = xs - (w - 1) / 2, ys - (h - 1) / 2
+    g = np.stack([xs * t[2] - F * t[0], ys * t[2] - F * t[1]], -1)
+    return (g * rho[..., None]).astype(np.float32)
+
+
+def test_far_distance_ignores_what_shows_no_parallax_and_the_walls_edge_inside_a_narrow_mask():
+    from companion.servo import far_distance_from_flow
+
+    # 0.2 m step: wall 2 m (ρ 0.1), far surface 5 m (ρ 0.04), sky (ρ 0) over 60 % of the opening
+    rho = np.full((240, 320), 0.1)
+    mask = np.zeros((240, 320), bool)
+    mask[40:140, 20:120] = True
+    rho[mask] = 0.04
+    rho[40:140, 20:80] = 0.0
+    assert far_distance_from_flow(_flow_of(rho), mask, 0.2) == pytest.approx(5.0, rel=1e-4)
+    # a mask 4 px wider than the opening on each side: the default erosion (4 px) leaves only the far surface
+    rho = np.full((240, 320), 0.1)
+    mask = np.zeros((240, 320), bool)
+    mask[60:180, 40:50] = True
+    rho[60:180, 44:46] = 0.04
+    assert far_distance_from_flow(_flow_of(rho), mask, 0.2) == pytest.approx(5.0, rel=1e-4)
+    assert far_distance_from_flow(_flow_of(rho), mask, 1e-3) is None    # a step of 1 mm measures nothing
+
+
+def test_wall_distance_uses_measurable_wall_only():
+    from companion.servo import wall_distance_from_flow
+
+    rho = np.full((240, 320), 0.1)                   # the wall 2 m away, 0.2 m step
+    assert wall_distance_from_flow(_flow_of(rho), None, 0.2) == pytest.approx(2.0, rel=1e-4)
+    assert wall_distance_from_flow(_flow_of(rho), None, 1e-3) is None
+    # the gap off-centre: the focus of expansion (unmeasurable) lies on the wall
+    mask = np.zeros((240, 320), bool)
+    mask[50:110, 60:140] = True
+    rho[mask] = 0.04
+    assert wall_distance_from_flow(_flow_of(rho), mask, 0.2) == pytest.approx(2.0, rel=1e-4)
+    # open sky (no parallax) over 70 % of the image's core beside the wall, the step's direction known (the
+    # flow alone cannot give it here): the wall still reads 2 m
+    sky = np.full((240, 320), 0.1)
+    sky[:, :230] = 0.0
+    assert wall_distance_from_flow(_flow_of(sky), None, 0.2, (0.0, 0.0, 1.0)) == pytest.approx(2.0, rel=1e-4)
+    # a mask over all but 1 % of the image: too little wall to tell
+    mask = np.ones((240, 320), bool)
+    mask[100:124, 100:132] = False
+    assert wall_distance_from_flow(_flow_of(np.full((240, 320), 0.1)), mask, 0.2) is None
+
+
+def test_wall_yaw_fits_the_wall_plane_only():
+    from companion.servo import wall_yaw_from_flow
+
+    h, w = 240, 320
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    xn, yn = (xs - (w - 1) / 2) / F, (ys - (h - 1) / 2) / F
+    t, p = math.radians(12.0), math.radians(10.0)
+    # a plane 2 m ahead turned by t (yaw) and pitched by p: 1/Z = n·(x/f, y/f, 1)/2, n its unit normal
+    n = (-math.sin(t) * math.cos(p), -math.sin(p), math.cos(t) * math.cos(p))
+    rho = 0.15 * (n[0] * xn + n[1] * yn + n[2]) / 2.0
+    mask = np.zeros((h, w), bool)
+    mask[70:130, 100:180] = True
+    rho[mask] = 0.01                                  # the far surface through the opening
+    rho[40:60, 60:140] = 0.005                       # far pixels the mask missed (under a fifth of the wall)
+    rho[h - h // 4:, :] = 0.15 * n[2] / 2.0          # the floor: not on the plane
+    assert wall_yaw_from_flow(_flow_of(rho), mask, F) == pytest.approx(t, abs=2e-5)
+    plane = 0.15 * (n[0] * xn + n[1] * yn + n[2]) / 2.0
+    # open sky (no parallax) over the left third, more than the fifth the percentile band drops
+    sky = plane.copy()
+    sky[:, : w // 3] = 0.0
+    assert wall_yaw_from_flow(_flow_of(sky), None, F) == pytest.approx(t, abs=2e-5)
+    # a mask over all but 3 % of the image: too little wall
+    mask = np.ones((h, w), bool)
+    mask[100:124, 80:160] = False
+    assert wall_yaw_from_flow(_flow_of(plane), mask, F) is None

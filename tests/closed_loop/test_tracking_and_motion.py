@@ -44,6 +44,28 @@ def test_rotational_flow_is_zero_without_rotation_and_derotate_removes_it():
     assert np.abs(rot).max() > 0.5  # 0.3° of pitch is more than a pixel
 
 
+def _yaw_flow(K, psi, h, w):
+    """Hand-worked flow of a pure yaw ψ (nose right) at pixel centres (j + ½, i + ½): a ray at bearing α from
+    the axis ends at α − ψ, so u' = cx + f·tan(α − ψ) and v' = cy + (v − cy)·cos α / cos(α − ψ)."""
+    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
+    ys, xs = np.mgrid[0:h, 0:w] + 0.5
+    alpha = np.arctan((xs - cx) / f)
+    return np.stack([cx + f * np.tan(alpha - psi) - xs, (ys - cy) * np.cos(alpha) / np.cos(alpha - psi) - (ys - cy)],
+                    -1)
+
+
+def test_rotational_flow_of_a_yaw_is_the_hand_worked_flow_and_derotate_removes_it():
+    K = np.array([[150.0, 0, 80.0], [0, 150.0, 50.0], [0, 0, 1.0]])
+    h, w, psi = 90, 170, math.radians(3.0)
+    want = _yaw_flow(K, psi, h, w)
+    got = rotational_flow(K, body_to_world_from_euler(0, 0, 0.2), body_to_world_from_euler(0, 0, 0.2 + psi), h, w)
+    assert got.dtype == np.float32 and got.shape == (h, w, 2)
+    assert got == pytest.approx(want, abs=1e-4)
+    assert np.abs(derotate(want.astype(np.float32), K, (0, 0, 0.2), (0, 0, 0.2 + psi))).max() < 1e-4
+    assert derotate(np.zeros((h, w, 2), np.float32), K, (0, 0, -0.1), (0, 0, -0.1 + psi)) == pytest.approx(-want,
+                                                                                                            abs=1e-4)
+
+
 def test_derotation_cancels_the_exact_flow_of_a_rendered_pure_rotation():
     """The camera turns on the spot (roll, pitch and yaw all change): the flow, from the rendered depth
     reprojected between the two poses (scenes.groundtruth, no derotation formula in it), is all rotation, so
@@ -84,3 +106,42 @@ def test_level_pixel_undoes_the_pitch():
     assert v > 130  # nose up: the point appears lower
     assert level_pixel((u, v), K, 0.0, math.radians(4)) == pytest.approx((160.0, 120.0), abs=0.05)
     assert level_pixel((100.0, 50.0), K, 0.0, 0.0) == pytest.approx((100.0, 50.0))
+
+
+# --- level and tilted pixels against hand-worked camera geometry (x right, y down, z forward) --------------
+
+KF, CX, CY = 156.4, 160.0, 120.0
+KM = np.array([[KF, 0, CX], [0, KF, CY], [0, 0, 1.0]])
+
+
+@pytest.mark.parametrize("pitch_deg", [6.0, -10.0])
+def test_the_pitched_cameras_centre_is_above_the_level_centre_by_f_tan_pitch(pitch_deg):
+    from companion.motion import level_pixel, tilted_pixel
+
+    t = math.radians(pitch_deg)
+    # nose up by t: the camera's axis points t above the horizon, which the level camera sees f·tan t higher
+    assert level_pixel((CX, CY), KM, 0.0, t) == pytest.approx((CX, CY - KF * math.tan(t)), abs=1e-9)
+    # and the level camera's centre (the heading's axis) appears f·tan t lower to the pitched camera
+    assert tilted_pixel((CX, CY), KM, 0.0, t) == pytest.approx((CX, CY + KF * math.tan(t)), abs=1e-9)
+
+
+def test_rolled_right_the_level_horizon_rises_on_the_right():
+    from companion.motion import level_pixel, tilted_pixel
+
+    phi, d = math.radians(20.0), 50.0
+    # right wing down by φ: the camera's x axis tips down, a level point d px right of centre appears at
+    # (cx + d·cos φ, cy − d·sin φ)
+    shown = (CX + d * math.cos(phi), CY - d * math.sin(phi))
+    assert tilted_pixel((CX + d, CY), KM, phi, 0.0) == pytest.approx(shown, abs=1e-9)
+    assert level_pixel(shown, KM, phi, 0.0) == pytest.approx((CX + d, CY), abs=1e-9)
+    # rolled and pitched: the two are inverses
+    for pixel in [(40.0, 30.0), (250.0, 200.0)]:
+        assert level_pixel(tilted_pixel(pixel, KM, 0.2, -0.15), KM, 0.2, -0.15) == pytest.approx(pixel, abs=1e-9)
+
+
+def test_a_ray_behind_the_other_camera_keeps_the_pixel():
+    from companion.motion import level_pixel, tilted_pixel
+
+    # pitched 120° nose up the camera's axis points backwards and up: behind the level camera, and the other way
+    assert level_pixel((200.0, 50.0), KM, 0.0, math.radians(120)) == (200.0, 50.0)
+    assert tilted_pixel((200.0, 50.0), KM, 0.0, math.radians(120)) == (200.0, 50.0)
