@@ -62,7 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--camera-delay", type=float, default=0.0, metavar="S",
                    help="the simulated camera's frames arrive S seconds after exposure, stamped with the exposure "
                         "time (default 0)")
-    p.add_argument("--run-dir", type=Path, help="run log directory (default runs/<time>)")
+    p.add_argument("-o", "--out", "--run-dir", dest="run_dir", type=Path,
+                   help="run log directory (default runs/<time>)")
     p.add_argument("--no-images", action="store_true", help="do not save per-step PNGs (faster evaluations)")
     p.add_argument("--rerun", nargs="?", const="", default=None, metavar="FILE",
                    help="record the flight for the Rerun viewer in FILE (default RUN_DIR/flight.rrd); needs the "

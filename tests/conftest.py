@@ -6,6 +6,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "2")
 os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 
 import logging  # noqa: E402
+import signal  # noqa: E402
 
 import pytest  # noqa: E402
 
@@ -23,6 +24,13 @@ if settings is not None:
     settings.register_profile("deep", settings.get_profile("ci"), derandomize=False)
     settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE")
                           or ("deep" if os.environ.get("FLOWGAP_FUZZ") == "deep" else "ci"))
+
+
+# A suite started in the background by a non-interactive shell (`cmd &` in a script, nohup) inherits SIGINT
+# ignored, and every process it starts would too; the Ctrl-C tests (flowgap-sitl, a stopped sweep, the Rerun
+# viewer) send SIGINT and need it delivered, as from a terminal.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(autouse=True)

@@ -237,7 +237,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--camera-delay", type=float, default=0.0, metavar="S",
                    help="camera frames reach the companion S seconds after exposure (default 0)")
     p.add_argument("--no-noise", action="store_true", help="exact-truth vehicle estimate")
-    p.add_argument("--run-dir", type=Path, help="where logs go (default runs/<time>-<scene>)")
+    p.add_argument("-o", "--out", "--run-dir", dest="run_dir", type=Path,
+                   help="the flight's run directory: logs, verdict, storyboard (default runs/<time>-<scene>)")
     p.add_argument("--result", type=Path, help="also write the verdict JSON here")
     p.add_argument("--timeout", type=float, default=300.0, help="wall seconds before giving up (default 300)")
     p.add_argument("--quiet", action="store_true", help="do not stream the two processes' logs")

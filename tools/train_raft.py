@@ -474,7 +474,7 @@ def build_parser() -> argparse.ArgumentParser:
                f"  {PROG} --steps 2000 --batch 4 --threads 2 --out runs/raft-train\n"
                f"  {PROG} --resume runs/raft-train/checkpoint-001000.pth --out runs/raft-train\n"
                f"  {PROG} --init raft-small.pth --device cuda --batch 16 --steps 20000\n"
-               f"  {PROG} --eval-only companion/flow/weights/raft-small-flowgap.pth\n"
+               f"  {PROG} --eval-only companion/flow/weights/raft-small-refined-flowgap.pth\n"
                "The final weights (<out>/raft-<variant>-flowgap.pth) load with "
                "make_flow_backend('raft', weights=PATH).")
     m = p.add_argument_group("mode")

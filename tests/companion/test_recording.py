@@ -83,6 +83,7 @@ def _free_tcp_port() -> int:
 
 def test_rerun_connect_streams_the_recording_live_to_a_running_viewer(tmp_path):
     """A headless viewer (``rerun --port P --save FILE``) receives what a connected recording logs."""
+    import os
     import shutil
     import signal
     import socket
@@ -95,8 +96,10 @@ def test_rerun_connect_streams_the_recording_live_to_a_running_viewer(tmp_path):
     if exe is None:
         pytest.skip("the rerun viewer binary is not installed beside the SDK")
     port, saved = _free_tcp_port(), tmp_path / "live.rrd"
+    # its own process group: `rerun` is a Python wrapper around the viewer binary; Ctrl-C in a terminal reaches
+    # both, and so does a SIGINT to the group
     viewer = subprocess.Popen([exe, "--port", str(port), "--save", str(saved)], stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
+                              stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + 20
         while True:
@@ -113,8 +116,12 @@ def test_rerun_connect_streams_the_recording_live_to_a_running_viewer(tmp_path):
         recording.close()
         time.sleep(1.0)
     finally:
-        viewer.send_signal(signal.SIGINT)
-        viewer.wait(timeout=20)
+        os.killpg(viewer.pid, signal.SIGINT)           # the wrapper and the binary: the binary saves and exits
+        try:
+            viewer.wait(timeout=20)
+        finally:
+            if viewer.poll() is None:
+                os.killpg(viewer.pid, signal.SIGKILL)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")      # a streamed .rrd has no footer: read by a whole-file scan
         rows = recorded_entities(saved)

@@ -34,7 +34,7 @@ __all__ = ["DEFAULT_WEIGHTS", "INPUT_SCALE_RANGE", "PRECISIONS", "RAFT_DEFAULTS"
 log = logging.getLogger(__name__)
 
 WEIGHTS_DIR = Path(__file__).resolve().parent.parent / "weights"
-DEFAULT_WEIGHTS = WEIGHTS_DIR / "raft-small-flowgap.pth"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "raft-small-refined-flowgap.pth"
 # The 4-level correlation pyramid halves the 1/8-resolution feature map three times, so a frame (after
 # padding to multiples of 8) must be at least 8 × 8 = 64 pixels on each side.
 MIN_SIDE = 64
