@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scenes.capture import CaptureSpec
 from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
 
 log = logging.getLogger("flowgap-eval-flights")
@@ -134,7 +135,7 @@ def draw_flight(spec, seed: int, start_index: int, world: str, altitude: float =
     """One flight's conditions: start, altitude, vehicle seed, and in the hard world wind and camera delay (a
     start is redrawn, up to 20 times, until an opening lies within ``IN_VIEW_DEG`` of its heading)."""
     rng = flight_rng(seed, spec.name, start_index)
-    if getattr(spec, "kind", None) == "capture":
+    if isinstance(spec, CaptureSpec):
         return _draw_capture_flight(spec, rng)
     hard = world == "hard"
     for _ in range(20 if hard else 1):
@@ -364,7 +365,7 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
 
     labels = {s: specs[s].name for s in scenes}      # spec paths are reported by their scene's name
     # a capture's gate is taken as passable: its author says the vehicle fits through it
-    passable = {labels[s]: getattr(specs[s], "kind", None) == "capture"
+    passable = {labels[s]: isinstance(specs[s], CaptureSpec)
                 or any(passable_openings(specs[s], BODY_RADIUS_M, PASS_MARGIN_M)) for s in scenes}
     jobs = [FlightJob(scene, labels[scene], i, draw_flight(specs[scene], args.seed, i, args.world),
                       flight_link_faults(link_faults, labels[scene], i))

@@ -87,12 +87,14 @@ def test_the_summary_says_where_the_flights_flew_and_how_many_were_reused(tmp_pa
 
 def test_a_capture_is_flown_from_its_own_start_and_judged_by_its_gate():
     import math
-    from types import SimpleNamespace
+    from pathlib import Path
 
+    from scenes.capture import CaptureSpec, Gate, Placement
     from tools.eval_flights import draw_flight, judge
 
-    capture = SimpleNamespace(kind="capture", name="room", start_ned=(4.0, -2.0, 0.0), start_yaw_deg=90.0,
-                              altitude_m=1.3)
+    capture = CaptureSpec(name="room", path=Path("room.capture.json"), ply=Path("room.ply"), to_ned=Placement(),
+                          gate=Gate((7.0, -2.0, -1.3), (1.0, 0.0, 0.0), (0.8, 0.8), (4.0, -2.0, -1.3)),
+                          start_ned=(4.0, -2.0, 0.0), start_yaw_deg=90.0, altitude_m=1.3)
     flights = [draw_flight(capture, 3, i, "standard") for i in range(20)]
     assert flights[0] == draw_flight(capture, 3, 0, "standard")                 # (seed, scene, start) only
     for f in flights:
