@@ -145,9 +145,10 @@ class RaftBackend:
         self.precision = resolve_precision(self.settings.precision, self._device)
         self.model.to(self._device).eval()
         self._previous_low: torch.Tensor | None = None
-        # (digest of the last second frame, its features): in a sequence of pairs (a, b), (b, c), ... the
-        # first frame's features are the previous pair's second's, computed once
-        self._features: tuple[bytes, torch.Tensor] | None = None
+        # (digest of the last second frame, its features, its quarter-resolution features or None): in a
+        # sequence of pairs (a, b), (b, c), ... the first frame's features are the previous pair's second's,
+        # computed once
+        self._features: tuple[bytes, torch.Tensor, torch.Tensor | None] | None = None
 
     # the settings by name, as the benchmarks and tools read them
     iters = property(lambda self: self.settings.iters)
@@ -176,11 +177,10 @@ class RaftBackend:
     @property
     def reuses_features(self) -> bool:
         """Whether a pair whose first frame was the previous pair's second reuses that frame's features: one
-        pass on the frames as they are (enlarged or mirrored frames, a second pass, or the quarter refinement
-        would need features of other images)."""
+        pass on the frames as they are (enlarged or mirrored frames, or a second pass, would need features of
+        other images)."""
         s = self.settings
-        return (s.input_scale == 1.0 and not s.refine_scale and not s.mirror_average
-                and not self.model.config.quarter_refine)
+        return s.input_scale == 1.0 and not s.refine_scale and not s.mirror_average
 
     @torch.inference_mode()
     def estimate(self, img1: np.ndarray, img2: np.ndarray, flow_init: np.ndarray | None = None,
@@ -190,17 +190,17 @@ class RaftBackend:
         init = None if flow_init is None else check_flow(flow_init, (h, w))
         previous = self._previous_low if self.warm_start else None
         settings = self.settings if iters is None else self.settings.replace(iters=iters)
-        fmap1 = None
+        known = None
         if self.reuses_features:
             first = _digest(img1)
             if self._features is not None and self._features[0] == first:
-                fmap1 = self._features[1]
+                known = self._features[1:]
         cache: dict = {}
         flow, low = estimate_flow(self.model, img1, img2, settings, flow_init=init, previous_low=previous,
                                   padding_mode=self.padding_mode, device=self._device, precision=self.precision,
-                                  fmap1=fmap1, features_out=cache if self.reuses_features else None)
+                                  known_features=known, features_out=cache if self.reuses_features else None)
         if self.reuses_features and "fmap2" in cache:
-            self._features = (_digest(img2), cache["fmap2"])
+            self._features = (_digest(img2), cache["fmap2"], cache["fquarter2"])
         if self.warm_start:
             self._previous_low = low
         return flow
@@ -214,7 +214,7 @@ def _digest(img: np.ndarray) -> bytes:
 def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, settings: InferenceSettings = RAFT_DEFAULTS,
                   flow_init: np.ndarray | None = None, previous_low: torch.Tensor | None = None,
                   padding_mode: str = "sintel", device: torch.device | str = "cpu",
-                  precision: str | None = None, fmap1: torch.Tensor | None = None,
+                  precision: str | None = None, known_features: tuple | None = None,
                   features_out: dict | None = None) -> tuple[np.ndarray, torch.Tensor]:
     """(H×W×2 float32 flow, 1/8-resolution flow of the first pass) of ``model`` for one pair of H×W×3 frames,
     run as ``settings`` say (``precision``: the resolved "bf16" or "fp32", default resolved from them).
@@ -223,15 +223,16 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, settings: Inf
     frames enlarged by :func:`refinement_scale`, whose flow is returned (the 1/8-resolution flow returned
     stays the first pass's, on the grid that ``previous_low`` is matched against).  With
     ``variational_levels``, the flow is then refined variationally (:func:`.variational.variational_refine`).
-    ``fmap1``: the first frame's features, already known (one pass on the frames as they are only);
-    ``features_out``: a dict that receives the second frame's features as ``"fmap2"``.
+    ``known_features``: the first frame's (features, quarter-resolution features or None), already known (one
+    pass on the frames as they are only); ``features_out``: a dict that receives the second frame's as
+    ``"fmap2"`` and ``"fquarter2"``.
     """
     device = torch.device(device)
     precision = precision or resolve_precision(settings.precision, device)
     autocast = (torch.autocast(device.type, torch.bfloat16) if precision == "bf16" else nullcontext())
     with autocast:
         flow, low = _one_pass(model, img1, img2, settings.iters, settings.input_scale, flow_init, previous_low,
-                              padding_mode, device, settings.mirror_average, fmap1, features_out)
+                              padding_mode, device, settings.mirror_average, known_features, features_out)
         if settings.refine_scale:
             scale = refinement_scale(flow, settings.refine_scale, settings.refine_min_scale, settings.refine_max_flow)
             flow, _ = _one_pass(model, img1, img2, settings.refine_iters, scale, flow, None, padding_mode, device,
@@ -252,7 +253,7 @@ def refinement_scale(flow: np.ndarray, refine_scale: float, min_scale: float, ma
     return float(np.clip(max_flow / max(longest, 1e-6), min_scale, refine_scale))
 def _one_pass(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float,
               flow_init: np.ndarray | None, previous_low: torch.Tensor | None, padding_mode: str,
-              device: torch.device | str, mirror_average: bool, fmap1: torch.Tensor | None = None,
+              device: torch.device | str, mirror_average: bool, known_features: tuple | None = None,
               features_out: dict | None = None) -> tuple[np.ndarray, torch.Tensor]:
     """One RAFT pass: (H×W×2 float32 flow, 1/8-resolution flow).
 
@@ -293,9 +294,10 @@ def _one_pass(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input
     if mirror_average:
         t1, t2 = torch.cat([t1, torch.flip(t1, dims=[-1])]), torch.cat([t2, torch.flip(t2, dims=[-1])])
         init = None if init is None else torch.cat([init, mirror_flow(init)])
-    out = model(t1, t2, iters=iters, flow_init=init, fmap1=fmap1)
+    fmap1, fquarter1 = known_features if known_features is not None else (None, None)
+    out = model(t1, t2, iters=iters, flow_init=init, fmap1=fmap1, fquarter1=fquarter1)
     if features_out is not None:
-        features_out["fmap2"] = out.fmap2
+        features_out["fmap2"], features_out["fquarter2"] = out.fmap2, out.fquarter2
     flow_up, flow_low = out.flow_up, out.flow_low
     if mirror_average:
         flow_up = 0.5 * (flow_up[:1] + mirror_flow(flow_up[1:]))

