@@ -400,6 +400,22 @@ def test_corr_block_lookup_matches_brute_force_and_channel_order():
             assert out[0, i * (2 * r + 1) + j, y, x].item() == pytest.approx(expected.item(), abs=1e-5)
 
 
+def test_corr_pyramid_levels_are_the_volume_average_pooled_over_the_second_frame():
+    import torch.nn.functional as F
+
+    torch.manual_seed(2)
+    n, d, h, w = 1, 16, 30, 40
+    f1, f2 = torch.randn(n, d, h, w), torch.randn(n, d, h, w)
+    volume = (torch.einsum("ndp,ndq->npq", f1.reshape(n, d, -1), f2.reshape(n, d, -1)) / np.sqrt(d))
+    expected = volume.reshape(n * h * w, 1, h, w)
+    corr = CorrBlock(f1, f2, num_levels=4, radius=3)
+    for level, got in enumerate(corr.pyramid):
+        if level:
+            expected = F.avg_pool2d(expected, 2, stride=2)
+        assert got.shape == expected.shape == (n * h * w, 1, h // 2 ** level, w // 2 ** level)
+        torch.testing.assert_close(got, expected, atol=2e-5, rtol=1e-5)
+
+
 def test_convex_upsampling_of_constant_flow_is_exact_inside():
     flow = torch.zeros(1, 2, 4, 5)
     flow[:, 0], flow[:, 1] = 1.25, -0.5

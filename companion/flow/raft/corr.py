@@ -34,12 +34,16 @@ class CorrBlock:
         self.num_levels = num_levels
         self.radius = radius
         n, d, h, w = fmap1.shape
-        corr = torch.matmul(fmap1.reshape(n, d, h * w).transpose(1, 2), fmap2.reshape(n, d, h * w))
-        corr = (corr / math.sqrt(d)).reshape(n * h * w, 1, h, w)
-        self.pyramid = [corr]
-        for _ in range(num_levels - 1):
-            corr = F.avg_pool2d(corr, 2, stride=2)
-            self.pyramid.append(corr)
+        # Pooling the volume over q is pooling frame 2's features, the dot product being linear: each level is
+        # one product with the pooled features (the same values, without pooling h·w maps of the volume)
+        f1 = fmap1.reshape(n, d, h * w).transpose(1, 2) / math.sqrt(d)
+        f2 = fmap2
+        self.pyramid = []
+        for level in range(num_levels):
+            if level:
+                f2 = F.avg_pool2d(f2, 2, stride=2)
+            h2, w2 = f2.shape[-2:]
+            self.pyramid.append(torch.matmul(f1, f2.reshape(n, d, h2 * w2)).reshape(n * h * w, 1, h2, w2))
         side = 2 * radius + 1
         d_ = torch.linspace(-radius, radius, side, device=fmap1.device, dtype=fmap1.dtype)
         dx = d_.view(side, 1).expand(side, side)          # slow index -> x offset
