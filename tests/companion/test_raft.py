@@ -696,9 +696,9 @@ def test_a_sequence_reuses_the_shared_frames_features_and_flows_as_if_it_did_not
     fresh = make_flow_backend("raft", random_init_seed=0, iters=3, refine_scale=0, variant=variant)
     if variant == "small-refined":       # its correction starts at zero: give it one that reads the features
         for backend in (seq, fresh):
+            weight = backend.model.refiner.flow.weight
             with torch.no_grad():
-                backend.model.refiner.flow.weight.copy_(
-                    0.01 * torch.randn(backend.model.refiner.flow.weight.shape, generator=torch.Generator().manual_seed(3)))
+                weight.copy_(0.01 * torch.randn(weight.shape, generator=torch.Generator().manual_seed(3)))
     assert seq.reuses_features
     calls = []
     original = seq.model.fnet.forward
