@@ -144,15 +144,13 @@ class RAFT(nn.Module):
             fmap2 = fmap2.float()
             if fmap1.shape != fmap2.shape:
                 raise ValueError(f"fmap1 must be {tuple(fmap2.shape)}, got {tuple(fmap1.shape)}")
-            if quarter:
-                if fquarter1.shape != fquarter2.shape:
-                    raise ValueError(f"fquarter1 must be {tuple(fquarter2.shape)}, got {tuple(fquarter1.shape)}")
-                fquarter = torch.cat([fquarter1.to(fquarter2.dtype), fquarter2], dim=0)
+            if quarter and fquarter1.shape != fquarter2.shape:
+                raise ValueError(f"fquarter1 must be {tuple(fquarter2.shape)}, got {tuple(fquarter1.shape)}")
         else:
             fout = self.fnet(torch.cat([image1, image2], dim=0), with_quarter=quarter)
-            if quarter:
-                fout, fquarter = fout
+            fout, fquarter = fout if quarter else (fout, None)
             fmap1, fmap2 = fout.float().chunk(2, dim=0)
+            fquarter1, fquarter2 = fquarter.chunk(2, dim=0) if quarter else (None, None)
         cout = self.cnet(image1, with_quarter=quarter)
         if quarter:
             cout, cquarter = cout
@@ -182,11 +180,9 @@ class RAFT(nn.Module):
         flow_low = coords1 - coords0
         flow_up = predictions[-1] if predictions else self._upsample(flow_low, net)
         if quarter:
-            q1, q2 = fquarter.chunk(2, dim=0)
-            flow_up = self._refine(flow_up, q1, q2, cquarter)
+            flow_up = self._refine(flow_up, fquarter1, fquarter2, cquarter)
             predictions.append(flow_up)
-        return RaftOutput(flow_low, flow_up, predictions if all_predictions else [], fmap2,
-                          fquarter.chunk(2, dim=0)[1] if quarter else None)
+        return RaftOutput(flow_low, flow_up, predictions if all_predictions else [], fmap2, fquarter2)
 
     def _refine(self, flow_up: torch.Tensor, f1: torch.Tensor, f2: torch.Tensor, context: torch.Tensor) -> torch.Tensor:
         """The quarter-resolution correction of a full-resolution flow (see :mod:`.refine`)."""
