@@ -8,7 +8,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.commander import Commander, VehicleStatus
+from sitl_vehicle.commander import Commander, Reply, VehicleStatus
 from sitl_vehicle.modes import FlightMode, UnsupportedMode, decode_custom_mode, mode_from_custom
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterError, ParameterStore
 from sitl_vehicle.sim import Setpoint
@@ -319,3 +319,301 @@ def test_a_delayed_return_failsafe_that_falls_due_on_the_ground_holds(commander)
     out = commander.update(at(15.6, 0.0, 0.0, 0.0, landed=True))        # the deadline, on the ground
     assert out.mode is FlightMode.AUTO_LOITER and commander.armed
     assert not any(text == "Failsafe: switching to Return" for _, text in commander.messages)
+
+
+# ----------------------------------------------------------------------- texts, replies, flags and timing
+INFO, WARNING, CRITICAL = mavlink.MAV_SEVERITY_INFO, mavlink.MAV_SEVERITY_WARNING, mavlink.MAV_SEVERITY_CRITICAL
+
+
+def headed(t, yaw, pos=(0.0, 0.0, -3.0), landed=False) -> VehicleStatus:
+    return VehicleStatus(time_s=t, position=pos, velocity=(0.0, 0.0, 0.0), yaw=yaw, armed=True, landed=landed)
+
+
+def test_boots_disarmed_without_a_failsafe_at_mission_item_0(commander):
+    out = commander.update(status())
+    assert out.armed is False and commander.failsafe is False  # booleans: the server compares and reports them
+    assert commander.mission_seq == 0 and commander.mission_finished is False  # MISSION_CURRENT.seq with no mission
+
+
+@pytest.mark.parametrize("kwargs, text", [
+    (dict(crashed=True), "Arming denied: vehicle crashed; restart the simulation"),
+    (dict(position_valid=False), "Arming denied: position estimate not valid yet"),
+    (dict(landed=False, z=-1.0), "Arming denied: vehicle is not landed"),
+])
+def test_a_refusal_is_announced_once_as_a_critical_statustext(commander, kwargs, text):
+    reply = commander.arm(status(**kwargs))
+    assert reply == Reply(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, text, announced=True)
+    assert list(commander.messages) == [(CRITICAL, text)]
+
+
+def test_arming_and_disarming_say_why(commander):
+    assert commander.arm(status()).accepted
+    assert commander.messages[-1] == (INFO, "Armed by external command")
+    reply = commander.disarm(status(t=1.0, landed=False, z=-2.0))
+    assert reply == Reply(mavlink.MAV_RESULT_DENIED, "Disarming denied: not landed", announced=True)
+    assert commander.messages[-1] == (CRITICAL, "Disarming denied: not landed")
+    assert commander.disarm(status(t=2.0)).accepted and commander.armed is False
+    assert commander.messages[-1] == (INFO, "Disarmed by external command")
+
+
+def test_refused_commands_name_the_reason(commander):
+    rejected = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+    replies = [commander.set_mode(FlightMode.OFFBOARD, status()),
+               commander.set_mode(FlightMode.AUTO_MISSION, status()),
+               commander.set_mode(FlightMode.POSCTL, status()),
+               commander.takeoff(status(), 3.0),
+               commander.return_to_launch(status())]
+    texts = ["Switching to Offboard is currently not possible: no setpoint stream",
+             "Switching to Mission is currently not possible: no mission (upload one first)",
+             "Switching to Position is currently not possible: no manual control input (send MANUAL_CONTROL)",
+             "Takeoff denied: arm first",
+             "Return denied: not flying"]
+    assert replies == [Reply(rejected, text, announced=True) for text in texts]
+    assert list(commander.messages) == [(CRITICAL, text) for text in texts]
+
+
+def test_arming_in_offboard_needs_the_stream_still_alive(commander):
+    commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 0.5)
+    assert commander.set_mode(FlightMode.OFFBOARD, status(t=1.5)).accepted   # exactly COM_OF_LOSS_T old: alive
+    assert commander.update(status(t=1.5)).mode is FlightMode.OFFBOARD
+    reply = commander.arm(status(t=1.6))                                     # 1.1 s old: lost
+    assert reply.text == "Arming denied: no offboard setpoint stream" and not commander.armed
+
+
+def test_a_crash_disarms_and_says_so(commander):
+    commander.arm(status())
+    assert commander.update(status(t=1.0, z=-1.0, landed=False, crashed=True)).armed is False
+    assert commander.messages[-1] == (INFO, "Crash detected: motors stopped")
+
+
+def test_offboard_stream_loss_while_disarmed_falls_back_to_hold(commander):
+    """PX4 leaves Offboard once its setpoints stop, armed or not (also after a disarm in Offboard)."""
+    commander.offboard_setpoint(Setpoint(position=(1.0, 0.0, -1.0)), 0.0)
+    assert commander.set_mode(FlightMode.OFFBOARD, status(t=0.0)).accepted
+    out = commander.update(status(t=1.5))
+    assert out.mode is FlightMode.AUTO_LOITER and not out.armed
+    assert commander.messages[-1] == (CRITICAL, "Failsafe: offboard lost, switching to Hold")
+
+    commander.offboard_setpoint(Setpoint(position=(1.0, 0.0, -1.0)), 2.0)
+    assert commander.set_mode(FlightMode.OFFBOARD, status(t=2.0)).accepted and commander.arm(status(t=2.0)).accepted
+    assert commander.disarm(status(t=2.1)).accepted
+    out = commander.update(status(t=3.5))
+    assert out.mode is FlightMode.AUTO_LOITER and not out.armed
+    assert commander.messages[-1] == (CRITICAL, "Failsafe: offboard lost, switching to Hold")
+
+
+def test_offboard_loss_holds_where_the_vehicle_stops_not_at_the_last_offboard_setpoint(commander):
+    commander.offboard_setpoint(Setpoint(position=(5.0, 0.0, -1.0)), 0.0)
+    commander.set_mode(FlightMode.OFFBOARD, status())
+    commander.arm(status())
+    out = commander.update(at(1.5, 2.0, 0.0, -1.0))
+    assert out.mode is FlightMode.AUTO_LOITER and out.setpoint.position == (2.0, 0.0, -1.0)  # at rest: here
+
+
+def test_a_mode_choice_or_a_return_command_ends_the_failsafe_state(commander):
+    commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 0.0)
+    commander.set_mode(FlightMode.OFFBOARD, status())
+    commander.arm(status())
+    commander.update(at(1.5, 0.0, 0.0, -2.0))                            # offboard lost: Hold, failsafe
+    assert commander.failsafe
+    assert commander.return_to_launch(at(1.6, 0.0, 0.0, -2.0)).accepted
+    assert commander.failsafe is False and commander.mode is FlightMode.AUTO_RTL
+
+    commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 2.0)
+    commander.set_mode(FlightMode.OFFBOARD, at(2.0, 0.0, 0.0, -2.0))
+    commander.update(at(3.5, 0.0, 0.0, -2.0))
+    assert commander.failsafe
+    assert commander.set_mode(FlightMode.AUTO_LOITER, at(3.6, 0.0, 0.0, -2.0)).accepted
+    assert commander.failsafe is False
+
+
+def test_takeoff_announces_its_altitude_and_completion_and_then_lets_other_modes_fly(commander):
+    commander.arm(status())
+    commander.takeoff(status(t=0.1), math.nan)
+    assert commander.messages[-1] == (INFO, "Takeoff to 2.5 m above home")
+    out = commander.update(status(t=3.0, z=-2.5, landed=False))
+    assert out.mode is FlightMode.AUTO_LOITER and commander.messages[-1] == (INFO, "Takeoff complete: holding")
+    commander.land(status(t=4.0, z=-2.5, landed=False))
+    out = commander.update(status(t=4.0, z=-2.5, landed=False))        # still at the takeoff point: landing
+    assert out.mode is FlightMode.AUTO_LAND
+    assert math.isnan(out.setpoint.position[2]) and out.setpoint.velocity[2] == pytest.approx(0.7)
+
+
+def test_hold_land_and_return_keep_the_heading_they_were_entered_with(commander):
+    commander.arm(status())
+    for mode, yaw in ((FlightMode.AUTO_LOITER, 0.7), (FlightMode.AUTO_LAND, -1.2), (FlightMode.AUTO_RTL, 2.0)):
+        assert commander.set_mode(mode, headed(1.0, yaw)).accepted
+        out = commander.update(headed(1.1, yaw + 0.3))                 # the vehicle turned meanwhile
+        assert out.mode is mode and out.setpoint.yaw == yaw
+
+
+def test_land_descends_where_it_was_commanded_even_if_it_drifts(commander):
+    commander.arm(status())
+    commander.land(at(1.0, 1.0, 2.0, -3.0))
+    out = commander.update(at(2.0, 1.5, 2.2, -2.5))
+    assert out.setpoint.position[:2] == (1.0, 2.0) and out.setpoint.velocity[2] == pytest.approx(0.7)
+
+
+def test_disarmed_on_the_ground_in_hold_the_setpoint_idles(commander):
+    """Landed and not yet flown (or disarmed after a flight): keep pressing down, so the thrust stays at idle."""
+    assert commander.set_mode(FlightMode.AUTO_LOITER, status()).accepted
+    sp = commander.update(status(t=0.1)).setpoint
+    assert math.isnan(sp.position[2]) and sp.velocity[2] == pytest.approx(0.7)      # MPC_LAND_SPEED
+    commander.arm(status(t=0.2))
+    sp = commander.update(status(t=0.3)).setpoint                                  # armed, not yet flown
+    assert math.isnan(sp.position[2]) and sp.velocity[2] == pytest.approx(0.7)
+    commander.takeoff(status(t=0.4), math.nan)
+    commander.update(status(t=3.0, z=-2.5, landed=False))                          # Hold at 2.5 m
+    commander.update(status(t=4.0, landed=True))                                   # set down in Hold
+    assert not commander.update(status(t=6.0, landed=True)).armed                  # COM_DISARM_LAND
+    sp = commander.update(status(t=6.1, landed=True)).setpoint
+    assert math.isnan(sp.position[2]) and sp.velocity[2] == pytest.approx(0.7)
+
+
+def test_hold_after_a_flight_keeps_its_point_through_a_ground_contact(commander):
+    """Hold's target stays the setpoint when the land detector says landed (a bounce, a gust pushing it down):
+    only Land or the auto-disarm wind the thrust down."""
+    commander.arm(status())
+    commander.takeoff(status(t=0.1), math.nan)
+    assert commander.update(status(t=3.0, z=-2.5, landed=False)).mode is FlightMode.AUTO_LOITER
+    out = commander.update(status(t=3.5, z=0.0, landed=True))
+    assert out.armed and out.setpoint.position == (0.0, 0.0, -2.5)
+
+
+# ------------------------------------------------------------------------------------ land detector
+def test_landing_is_announced_and_disarms_exactly_com_disarm_land_later(commander):
+    commander.arm(status())
+    commander.update(status(t=1.0, z=-1.0, landed=False))
+    commander.update(status(t=3.0, landed=True))
+    assert commander.messages[-1] == (INFO, "Landing detected")
+    assert commander.update(status(t=4.9, landed=True)).armed
+    assert not commander.update(status(t=5.0, landed=True)).armed              # 2 s, PX4's COM_DISARM_LAND
+    assert commander.messages[-1] == (INFO, "Disarmed by landing")
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.5])
+def test_com_disarm_land_below_a_second_disarms_that_soon(commander, delay):
+    commander.params.set("COM_DISARM_LAND", delay)
+    commander.arm(status())
+    commander.update(status(t=1.0, z=-1.0, landed=False))
+    if delay > 0:
+        assert commander.update(status(t=3.0, landed=True)).armed
+    assert not commander.update(status(t=3.0 + delay, landed=True)).armed
+
+
+def test_preflight_auto_disarm_counts_from_arming_and_says_why(commander):
+    commander.arm(status(t=100.0))
+    assert commander.update(status(t=109.9)).armed
+    assert not commander.update(status(t=110.0)).armed                        # COM_DISARM_PRFLT 10 s
+    assert commander.messages[-1] == (INFO, "Disarmed: no takeoff after arming")
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.5])
+def test_com_disarm_prflt_below_a_second_disarms_that_soon(commander, delay):
+    commander.params.set("COM_DISARM_PRFLT", delay)
+    commander.arm(status(t=100.0))
+    if delay > 0:
+        assert commander.update(status(t=100.4)).armed
+    assert not commander.update(status(t=100.0 + delay)).armed
+
+
+# -------------------------------------------------------------------------------------------- Return
+def test_return_legs_switch_within_nav_acc_rad_of_a_home_away_from_the_origin(commander):
+    for name, value in (("RTL_RETURN_ALT", 5.0), ("RTL_DESCEND_ALT", 3.0), ("RTL_LAND_DELAY", 1.0),
+                        ("NAV_ACC_RAD", 0.5)):
+        commander.params.set(name, value)
+    commander.arm(at(0.0, 2.0, -3.0, 0.0, landed=True))                  # home (2, -3, 0)
+    assert commander.return_to_launch(at(10.0, 6.0, 1.0, -2.0)).accepted
+    assert commander.messages[-1] == (INFO, "Return: flying home at 5.0 m above home")
+    legs = [
+        (at(10.1, 6.0, 1.0, -4.0), (6.0, 1.0, -5.0)),        # climbing, 1 m short
+        (at(11.0, 6.0, 1.0, -4.5), (2.0, -3.0, -5.0)),       # 0.5 m short: NAV_ACC_RAD, fly home
+        (at(12.0, 2.0, 1.0, -5.0), (2.0, -3.0, -5.0)),       # 4 m east of home: not there yet
+        (at(13.0, -2.0, -3.0, -5.0), (2.0, -3.0, -5.0)),     # 4 m south of home
+        (at(14.0, 2.0, -2.5, -5.0), (2.0, -3.0, -3.0)),      # 0.5 m from home: descend
+        (at(15.0, 2.0, -3.0, -3.5), (2.0, -3.0, -3.0)),      # 0.5 m above the descend altitude: wait 1 s
+    ]
+    for state, target in legs:
+        out = commander.update(state)
+        assert out.mode is FlightMode.AUTO_RTL and out.setpoint.position == target, state
+        assert not commander.landing
+    out = commander.update(at(16.0, 2.3, -3.0, -3.5))        # RTL_LAND_DELAY over: land at home
+    assert commander.landing and out.setpoint.position[:2] == (2.0, -3.0)
+    assert commander.messages[-1] == (INFO, "Return: landing at home")
+
+
+def test_a_return_left_during_its_wait_does_not_land_later(commander):
+    commander.params.set("RTL_RETURN_ALT", 5.0)
+    commander.params.set("RTL_DESCEND_ALT", 5.0)
+    commander.params.set("RTL_LAND_DELAY", 10.0)
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.return_to_launch(at(1.0, 0.0, 0.0, -5.0))
+    commander.update(at(1.1, 0.0, 0.0, -5.0))                # at home, at altitude: waiting 10 s
+    commander.set_mode(FlightMode.AUTO_LOITER, at(2.0, 0.0, 0.0, -5.0))
+    out = commander.update(at(20.0, 0.0, 0.0, -5.0))
+    assert out.mode is FlightMode.AUTO_LOITER and out.setpoint.position == (0.0, 0.0, -5.0)
+    assert not any("landing at home" in text for _, text in commander.messages)
+
+
+# ------------------------------------------------------------------------------------- link losses
+def test_data_link_loss_needs_a_ground_station_first_and_its_messages_are_graded(commander):
+    commander.params.set("NAV_DLL_ACT", 2.0)                            # Return
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.set_mode(FlightMode.AUTO_LOITER, at(0.0, 0.0, 0.0, -2.0))
+    out = commander.update(at(60.0, 0.0, 0.0, -2.0))                   # no ground station ever: nothing
+    assert out.mode is FlightMode.AUTO_LOITER and not commander.failsafe
+    commander.messages.clear()
+    commander.gcs_heartbeat(60.0)                                       # connecting is no "regained"
+    assert not commander.messages
+    commander.update(at(70.5, 0.0, 0.0, -2.0))
+    assert (CRITICAL, "Connection to ground station lost") in commander.messages
+    commander.gcs_heartbeat(71.0)
+    assert commander.messages[-1] == (INFO, "Data link regained")
+
+
+def test_a_second_loss_at_the_deadline_reports_the_seconds_left_rounded(commander):
+    from sitl_vehicle.manual import Sticks
+
+    commander.params.set("NAV_DLL_ACT", 2.0)                            # Return
+    commander.params.set("NAV_RCL_ACT", 3.0)                            # Land
+    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
+    commander.gcs_heartbeat(0.0)
+    commander.set_mode(FlightMode.AUTO_LOITER, at(0.0, 0.0, 0.0, -2.0))
+    commander.update(at(10.5, 0.0, 0.0, -2.0))                          # data link lost: Return at 15.5
+    assert commander.messages[-1] == (CRITICAL, "Failsafe: data link lost, switching to Return in 5 s "
+                                                "(Hold until then)")
+    commander.manual_control(Sticks(), 14.8)
+    assert commander.update(at(15.4, 0.0, 0.0, -2.0)).mode is FlightMode.AUTO_LOITER   # sticks lost, 0.1 s left
+    assert (CRITICAL, "Manual control lost") in commander.messages
+    assert commander.messages[-1] == (CRITICAL, "Failsafe: manual control lost, switching to Land in 0 s")
+    assert commander.update(at(15.5, 0.0, 0.0, -2.0)).mode is FlightMode.AUTO_LAND
+    assert commander.messages[-1] == (CRITICAL, "Failsafe: switching to Land")
+
+
+def test_a_failsafe_acting_at_once_says_so_critically(commander):
+    commander.params.set("COM_OBL_RC_ACT", 4.0)                         # Land
+    commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 0.0)
+    commander.set_mode(FlightMode.OFFBOARD, status())
+    commander.arm(status())
+    assert commander.update(at(1.5, 0.0, 0.0, -2.0)).mode is FlightMode.AUTO_LAND
+    assert commander.messages[-1] == (CRITICAL, "Failsafe: offboard lost, switching to Land")
+
+
+# ------------------------------------------------------------------------------------------- the log
+def test_the_log_records_mode_changes_statustexts_and_mission_items_reached(caplog):
+    import logging
+
+    from sitl_vehicle.mission import NAV_WAYPOINT, MissionItem
+
+    caplog.set_level(logging.INFO, logger="sitl_vehicle.commander")
+    commander = Commander(ParameterStore(COMMANDER_PARAMS))
+    commander.arm(status())
+    commander.set_mode(FlightMode.AUTO_LOITER, at(0.5, 0.0, 0.0, -2.0))     # Hold again: no mode change
+    wp = MissionItem(0, NAV_WAYPOINT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, (0.0, 0.0, 0.0, math.nan),
+                     0.0, 0.0, 2.0, 3.0, 0.0, True, math.nan)
+    commander.set_mission([wp], at(0.5, 0.0, 0.0, -2.0))
+    commander.set_mode(FlightMode.AUTO_MISSION, at(1.0, 0.0, 0.0, -2.0))
+    commander.update(at(2.5, 3.0, 0.0, -2.0))
+    lines = [record.getMessage() for record in caplog.records if record.name == "sitl_vehicle.commander"]
+    assert lines == ["Armed by external command", "mode Hold -> Mission", "mission item 0 reached at t=2.50 s",
+                     "Mission finished, loitering"]

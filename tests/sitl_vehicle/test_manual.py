@@ -350,3 +350,232 @@ def test_stabilized_and_manual_sticks_set_the_attitude_and_the_throttle_the_thru
     assert mode.base_mode_flags & mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
     assert not mode.base_mode_flags & mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
     assert mavutil.interpret_px4_mode(mode.base_mode_flags, mode.custom_mode) == mode.name
+
+
+# ------------------------------------------------------------------ arming limits, loss timing and texts
+INFO, CRITICAL = mavlink.MAV_SEVERITY_INFO, mavlink.MAV_SEVERITY_CRITICAL
+
+
+@pytest.mark.parametrize("mode, limit, text", [
+    (FlightMode.STABILIZED, 0.2, "Arming denied: throttle not low; pull it down to arm"),  # PX4: low throttle
+    (FlightMode.MANUAL, 0.2, "Arming denied: throttle not low; pull it down to arm"),
+    (FlightMode.POSCTL, 0.6, "Arming denied: throttle above center"),                      # PX4: not above 60 %
+    (FlightMode.ALTCTL, 0.6, "Arming denied: throttle above center"),
+])
+def test_arming_throttle_limits_are_inclusive_and_the_refusal_says_why(commander, mode, limit, text):
+    commander.manual_control(Sticks(throttle=limit + 0.01), 0.0)
+    assert commander.set_mode(mode, status()).accepted
+    reply = commander.arm(status())
+    assert reply.text == text and commander.messages[-1] == (CRITICAL, text) and not commander.armed
+    commander.manual_control(Sticks(throttle=limit), 0.1)
+    assert commander.arm(status(0.1)).accepted
+
+
+def test_sticks_exactly_com_rc_loss_t_old_are_still_alive(commander):
+    commander.manual_control(CENTRED, 0.0)
+    assert not commander.messages                                  # the first sticks are no "regained"
+    assert commander.set_mode(FlightMode.POSCTL, status(0.5)).accepted   # 0.5 s old: COM_RC_LOSS_T
+    commander.arm(status(0.5), force=True)
+    assert commander.update(flying(0.5)).mode is FlightMode.POSCTL
+    assert not any(text == "Manual control lost" for _, text in commander.messages)
+
+
+def test_manual_control_loss_and_return_are_graded_critical_and_info(commander):
+    airborne_in(commander, FlightMode.POSCTL)
+    commander.update(flying(1.6))
+    assert (CRITICAL, "Manual control lost") in commander.messages
+    assert commander.messages[-1] == (CRITICAL, "Failsafe: manual control lost, switching to Return in 5 s "
+                                                "(Hold until then)")
+    commander.manual_control(CENTRED, 2.0)
+    assert commander.messages[-1] == (INFO, "Manual control regained")
+    commander.update(flying(6.6))
+    assert commander.messages[-2] == (CRITICAL, "Failsafe: switching to Return")
+
+
+def test_a_failsafe_in_the_mode_it_wants_continues_and_says_so_critically(commander):
+    commander.params.set("NAV_RCL_ACT", 1.0)                     # Hold
+    commander.manual_control(CENTRED, 0.0)
+    assert commander.arm(status()).accepted                      # Hold
+    out = commander.update(flying(2.0))
+    assert out.mode is FlightMode.AUTO_LOITER and commander.failsafe
+    assert commander.messages[-1] == (CRITICAL, "Failsafe: manual control lost, continuing Hold")
+
+
+def test_re_arming_after_a_motor_stop_failsafe_clears_it(commander):
+    commander.params.set("NAV_RCL_ACT", 6.0)                     # disarm
+    airborne_in(commander, FlightMode.POSCTL)
+    assert not commander.update(flying(2.0)).armed and commander.failsafe
+    assert commander.messages[-1] == (INFO, "Failsafe: manual control lost, motors stopped")
+    commander.manual_control(CENTRED, 3.0)
+    assert commander.arm(status(3.0)).accepted
+    assert commander.failsafe is False
+
+
+def test_the_stick_modes_act_on_a_manual_control_loss_whatever_com_rcl_except_says(commander):
+    commander.params.set("COM_RCL_EXCEPT", 7.0)                  # every excepted mode: Mission, auto, Offboard
+    commander.params.set("COM_FAIL_ACT_T", 0.0)
+    airborne_in(commander, FlightMode.POSCTL)
+    out = commander.update(flying(2.0))
+    assert out.mode is FlightMode.AUTO_RTL and commander.failsafe
+
+
+def test_a_com_fail_act_t_of_0_1_s_acts_at_once_and_the_sticks_do_not_take_over(commander):
+    commander.params.set("NAV_DLL_ACT", 2.0)                     # data link lost: Return
+    commander.params.set("COM_FAIL_ACT_T", 0.1)                  # PX4: 0.1 s or less is no delay
+    commander.manual_control(CENTRED, 0.0)
+    commander.gcs_heartbeat(0.0)
+    assert commander.arm(status()).accepted
+    _stream(commander, [CENTRED] * 6, 10.0)
+    assert commander.mode is FlightMode.AUTO_RTL
+    assert _stream(commander, [CENTRED, Sticks(roll=-0.6)], 11.0)[-1] is FlightMode.AUTO_RTL
+
+
+# -------------------------------------------------------------------------------- stick takeover
+def _armed_in_hold(commander, sticks=CENTRED):
+    commander.manual_control(sticks, 0.0)
+    assert commander.arm(status()).accepted
+    return commander
+
+
+def test_a_takeover_says_so_and_ends_the_failsafe(commander):
+    commander.params.set("COM_OBL_RC_ACT", 5.0)                  # offboard lost: Hold, the sticks may take over
+    from sitl_vehicle.sim import Setpoint
+    commander.manual_control(CENTRED, 0.0)
+    commander.offboard_setpoint(Setpoint(position=(0.0, 0.0, -2.0)), 0.0)
+    assert commander.set_mode(FlightMode.OFFBOARD, status()).accepted and commander.arm(status()).accepted
+    assert _stream(commander, [CENTRED] * 3, 2.0)[-1] is FlightMode.AUTO_LOITER and commander.failsafe
+    assert _stream(commander, [CENTRED, Sticks(pitch=0.5)], 3.0)[-1] is FlightMode.POSCTL
+    assert commander.failsafe is False
+    assert commander.messages[-1] == (INFO, "Sticks moved: pilot takes over from Hold, switching to Position")
+
+
+def test_a_push_exactly_one_window_after_the_last_sample_still_counts(commander):
+    _armed_in_hold(commander)
+    commander.manual_control(CENTRED, 10.0)
+    assert commander.update(flying(10.0)).mode is FlightMode.AUTO_LOITER
+    commander.manual_control(Sticks(pitch=0.4), 11.0)            # 1 s later (STICK_MOVE_WINDOW_S): still within
+    assert commander.update(flying(11.0)).mode is FlightMode.POSCTL
+
+
+def test_the_yaw_stick_takes_over_too(commander):
+    _armed_in_hold(commander, Sticks(yaw=-0.2))
+    assert _stream(commander, [Sticks(yaw=-0.2), Sticks(yaw=0.2)], 5.0)[-1] is FlightMode.POSCTL   # 40 % > 30 %
+
+
+def test_the_throttle_counts_double_but_no_more(commander):
+    _armed_in_hold(commander)
+    assert _stream(commander, [CENTRED, Sticks(throttle=0.62)], 5.0)[-1] is FlightMode.AUTO_LOITER  # 24 % < 30 %
+    assert _stream(commander, [CENTRED, Sticks(throttle=0.66)], 7.0)[-1] is FlightMode.POSCTL       # 32 % > 30 %
+
+
+def test_a_push_of_exactly_com_rc_stick_ov_is_not_a_takeover(commander):
+    commander.params.set("COM_RC_STICK_OV", 50.0)
+    _armed_in_hold(commander)
+    assert _stream(commander, [CENTRED, Sticks(pitch=0.5)], 5.0)[-1] is FlightMode.AUTO_LOITER       # not more
+    assert _stream(commander, [CENTRED, Sticks(pitch=0.55)], 7.0)[-1] is FlightMode.POSCTL
+
+
+def test_a_push_before_arming_does_not_take_over_but_moving_back_after_arming_does(commander):
+    commander.manual_control(CENTRED, 0.0)
+    commander.update(status(0.0))
+    commander.manual_control(Sticks(pitch=0.4), 0.05)
+    assert commander.update(status(0.05)).mode is FlightMode.AUTO_LOITER         # disarmed: nothing to take
+    assert commander.arm(status(0.1)).accepted
+    commander.manual_control(CENTRED, 0.15)                                       # 40 % back within 1 s
+    assert commander.update(status(0.15, armed=True)).mode is FlightMode.POSCTL
+
+
+@pytest.mark.parametrize("bits", [0.0, 2.0])
+def test_without_com_rc_override_bit_1_the_sticks_never_take_over_an_auto_mode(commander, bits):
+    commander.params.set("COM_RC_OVERRIDE", bits)
+    _armed_in_hold(commander)
+    assert _stream(commander, [CENTRED, Sticks(pitch=1.0), CENTRED], 5.0) == [FlightMode.AUTO_LOITER] * 3
+
+
+# ------------------------------------------------------------------------------ stick shaping params
+def test_position_mode_follows_the_dead_zone_expo_and_speed_parameters(commander):
+    commander.params.set("MPC_HOLD_DZ", 0.3)
+    commander.params.set("MPC_XY_MAN_EXPO", 0.0)                 # linear
+    commander.params.set("MPC_VEL_MANUAL", 8.0)
+    airborne_in(commander, FlightMode.POSCTL)
+    commander.manual_control(Sticks(pitch=0.65), 1.1)
+    sp = commander.update(flying(1.1)).setpoint
+    assert sp.velocity[0] == pytest.approx((0.65 - 0.3) / (1.0 - 0.3) * 8.0)       # 4 m/s north
+
+
+def test_throttle_and_yaw_sticks_follow_their_expo_and_the_yaw_rate_parameter(commander):
+    commander.params.set("MPC_HOLD_DZ", 0.2)
+    commander.params.set("MPC_Z_MAN_EXPO", 0.0)
+    commander.params.set("MPC_YAW_EXPO", 0.0)
+    commander.params.set("MPC_MAN_Y_MAX", 100.0)
+    airborne_in(commander, FlightMode.POSCTL)
+    commander.manual_control(Sticks(throttle=0.8, yaw=0.6), 1.1)
+    sp = commander.update(flying(1.1)).setpoint
+    up = ((2 * 0.8 - 1) - 0.2) / (1.0 - 0.2)                     # 0.5 of full climb, linear
+    assert sp.velocity[2] == pytest.approx(-up * 3.0)            # MPC_Z_VEL_MAX_UP's default, 3 m/s
+    assert sp.yaw_rate == pytest.approx((0.6 - 0.2) / (1.0 - 0.2) * math.radians(100.0))
+
+
+def test_stabilized_tilts_to_mpc_man_tilt_max_at_full_stick(commander):
+    commander.params.set("MPC_MAN_TILT_MAX", 20.0)
+    commander.manual_control(Sticks(throttle=0.0), 0.0)
+    assert commander.set_mode(FlightMode.STABILIZED, status()).accepted and commander.arm(status()).accepted
+    commander.manual_control(Sticks(pitch=1.0, throttle=0.5), 0.1)
+    assert commander.update(flying(0.1)).setpoint.pitch == pytest.approx(-math.radians(20.0))
+
+
+def test_the_climb_and_descent_limits_come_from_the_vehicles_velocity_limits():
+    """The server's parameter store also holds the controller's MPC_Z_VEL_MAX_UP/DN: full throttle climbs at
+    the one, zero throttle descends at the other."""
+    from sitl_vehicle.params import ParamSpec
+
+    limits = [ParamSpec("MPC_Z_VEL_MAX_UP", 3.0, 0.1, 10.0, "m/s", "Climb velocity limit"),
+              ParamSpec("MPC_Z_VEL_MAX_DN", 1.5, 0.1, 10.0, "m/s", "Descent velocity limit")]
+    commander = Commander(ParameterStore(COMMANDER_PARAMS + limits))
+    commander.params.set("MPC_Z_VEL_MAX_UP", 2.0)
+    commander.params.set("MPC_Z_VEL_MAX_DN", 1.0)
+    airborne_in(commander, FlightMode.POSCTL)
+    commander.manual_control(Sticks(throttle=1.0), 1.1)
+    assert commander.update(flying(1.1)).setpoint.velocity[2] == pytest.approx(-2.0)
+    commander.manual_control(Sticks(throttle=0.0), 1.2)
+    assert commander.update(flying(1.2)).setpoint.velocity[2] == pytest.approx(1.0)
+
+
+# ------------------------------------------------------------------------------------ heading hold
+def test_a_released_yaw_stick_holds_the_heading_it_was_released_at(commander):
+    airborne_in(commander, FlightMode.POSCTL)
+    commander.manual_control(Sticks(yaw=1.0), 1.1)
+    commander.update(flying(1.1))
+    commander.manual_control(CENTRED, 1.2)
+    assert commander.update(flying(1.2, yaw=0.7)).setpoint.yaw == pytest.approx(0.7)
+    commander.manual_control(CENTRED, 1.3)
+    assert commander.update(flying(1.3, yaw=0.9)).setpoint.yaw == pytest.approx(0.7)   # held, not followed
+
+
+def test_entering_position_mode_holds_the_heading_it_was_entered_at(commander):
+    commander.manual_control(CENTRED, 0.0)
+    assert commander.arm(status()).accepted
+    commander.manual_control(CENTRED, 0.5)
+    commander.update(flying(0.5))
+    assert commander.set_mode(FlightMode.POSCTL, flying(0.5, yaw=0.3)).accepted
+    commander.manual_control(CENTRED, 0.6)
+    out = commander.update(flying(0.6, yaw=0.5))
+    assert out.mode is FlightMode.POSCTL and out.setpoint.yaw == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize("mode", [FlightMode.POSCTL, FlightMode.ALTCTL])
+def test_moving_sticks_turn_with_the_yaw_stick_or_hold_the_heading(commander, mode):
+    airborne_in(commander, mode)
+    commander.manual_control(Sticks(pitch=1.0, yaw=1.0), 1.1)
+    sp = commander.update(flying(1.1)).setpoint
+    assert math.isnan(sp.yaw) and sp.yaw_rate == pytest.approx(math.radians(150.0))     # MPC_MAN_Y_MAX
+    commander.manual_control(Sticks(pitch=1.0), 1.2)
+    sp = commander.update(flying(1.2, yaw=0.4)).setpoint
+    assert sp.yaw == pytest.approx(0.4) and math.isnan(sp.yaw_rate)
+
+
+def test_altitude_mode_throttle_climbs_at_a_velocity(commander):
+    airborne_in(commander, FlightMode.ALTCTL)
+    commander.manual_control(Sticks(throttle=1.0), 1.1)
+    sp = commander.update(flying(1.1)).setpoint
+    assert sp.velocity[2] == pytest.approx(-3.0) and math.isnan(sp.position[2])         # MPC_Z_VEL_MAX_UP

@@ -8,7 +8,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.commander import Commander, VehicleStatus
+from sitl_vehicle.commander import Commander, Reply, VehicleStatus
 from sitl_vehicle.mavlink_io import Home
 from sitl_vehicle.mission import NAV_LAND, NAV_TAKEOFF, NAV_WAYPOINT, MissionError, mission_item_from_message
 from sitl_vehicle.modes import FlightMode
@@ -183,3 +183,162 @@ def test_a_return_item_hands_over_to_return_mode_and_set_current_skips_ahead():
     assert c.update(air).setpoint.position == pytest.approx((6.0, 0.0, -1.5), abs=0.01)  # item 1, not 0
     out = c.update(status(1.0, pos=(6.0, 0.0, -1.5), landed=False, armed=True))
     assert list(c.mission_reached) == [1, 2] and out.mode is FlightMode.AUTO_RTL
+
+
+# ------------------------------------------------------------------- the commander's mission semantics
+def local_item(seq, command, north=math.nan, east=math.nan, alt=2.0, hold_s=0.0, yaw_deg=math.nan):
+    """An item at exact local coordinates (north/east NaN: where the vehicle is), ``alt`` above home."""
+    from sitl_vehicle.mission import MissionItem
+
+    return MissionItem(seq, command, REL, (hold_s, 0.0, 0.0, yaw_deg), math.nan, math.nan, alt, north, east,
+                       True, math.nan)
+
+
+def air(t, x=0.0, y=0.0, z=-2.0, vel=(0.0, 0.0, 0.0)):
+    return VehicleStatus(time_s=t, position=(x, y, z), velocity=vel, yaw=0.0, armed=True, landed=False)
+
+
+def flying_mission(items, at=None):
+    """Armed on the ground, then Mission mode entered in the air at ``at`` (default 2 m over the origin)."""
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.set_mission(items, status(0))
+    assert c.arm(status(0)).accepted
+    assert c.set_mode(FlightMode.AUTO_MISSION, at or air(0.5)).accepted
+    return c
+
+
+def test_an_upload_is_not_finished_and_outside_mission_mode_changes_nothing():
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.arm(status(0))
+    c.set_mode(FlightMode.AUTO_LOITER, air(1.0))
+    c.messages.clear()
+    c.set_mission([local_item(0, NAV_WAYPOINT, 3.0, 0.0)], air(1.5))
+    assert c.mission_finished is False and not c.messages
+    out = c.update(air(1.6, x=0.5))
+    assert out.mode is FlightMode.AUTO_LOITER and out.setpoint.position == (0.0, 0.0, -2.0)
+
+
+def test_a_new_mission_while_flying_one_holds_where_the_vehicle_stops():
+    c = flying_mission([local_item(0, NAV_WAYPOINT, 10.0, 0.0)])
+    moving = air(1.0, x=1.0, vel=(2.0, 0.0, 0.0))
+    c.set_mission([local_item(0, NAV_WAYPOINT, -5.0, 0.0)], moving)
+    assert c.messages[-1] == (mavlink.MAV_SEVERITY_WARNING, "Mission changed in flight: switching to Hold")
+    out = c.update(moving)
+    assert out.mode is FlightMode.AUTO_LOITER
+    assert out.setpoint.position == pytest.approx((1.0 + 2.0 ** 2 / (2 * 2.0), 0.0, -2.0))    # v²/2a ahead
+    assert c.mission_seq == 0 and c.mission_finished is False
+
+
+def test_set_current_accepts_every_item_and_refuses_the_others_with_the_reason():
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.set_mission([local_item(i, NAV_WAYPOINT, float(i), 0.0) for i in range(3)], status(0))
+    for seq in (2, 0):
+        assert c.set_mission_current(seq, status(0)).accepted and c.mission_seq == seq
+    for seq in (3, -1):
+        text = f"Mission item {seq} does not exist (the mission has 3 items)"
+        assert c.set_mission_current(seq, status(0)) == Reply(mavlink.MAV_RESULT_DENIED, text, announced=True)
+        assert c.messages[-1] == (mavlink.MAV_SEVERITY_CRITICAL, text) and c.mission_seq == 0
+
+
+def test_set_current_jumps_at_once_in_mission_mode_and_leaves_other_modes_alone():
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.set_mission([local_item(0, NAV_WAYPOINT, 3.0, 0.0), local_item(1, NAV_WAYPOINT, 6.0, 0.0, yaw_deg=90.0)],
+                  status(0))
+    c.arm(status(0))
+    c.set_mode(FlightMode.AUTO_LOITER, air(1.0))
+    assert c.set_mission_current(1, air(1.0)).accepted
+    sp = c.update(air(1.1)).setpoint
+    assert sp.position == (0.0, 0.0, -2.0) and sp.yaw == 0.0                # Hold is not disturbed
+    assert c.set_mode(FlightMode.AUTO_MISSION, air(1.2)).accepted           # continues from item 1
+    sp = c.update(air(1.3)).setpoint
+    assert sp.position == (6.0, 0.0, -2.0) and sp.yaw == pytest.approx(math.pi / 2)   # param4: 90 deg
+    assert c.set_mission_current(0, air(1.4)).accepted
+    sp = c.update(air(1.5)).setpoint
+    assert sp.position == (3.0, 0.0, -2.0) and sp.yaw == pytest.approx(math.pi / 2)   # no param4: heading kept
+
+
+def test_mission_start_from_an_item_and_out_of_range():
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.set_mission([local_item(0, NAV_WAYPOINT, 3.0, 0.0), local_item(1, NAV_WAYPOINT, 6.0, 0.0)], status(0))
+    c.arm(status(0))
+    reply = c.start_mission(air(1.0), 2)
+    assert reply == Reply(mavlink.MAV_RESULT_DENIED, "Mission start denied: no item 2", announced=True)
+    assert c.mode is FlightMode.AUTO_LOITER
+    assert c.start_mission(air(1.0), 1).accepted and c.mission_finished is False
+    assert c.update(air(1.1)).setpoint.position == (6.0, 0.0, -2.0)
+
+
+def test_a_finished_mission_entered_again_starts_from_its_first_item():
+    c = flying_mission([local_item(0, NAV_WAYPOINT, 3.0, 0.0), local_item(1, NAV_WAYPOINT, 6.0, 0.0)])
+    c.update(air(1.0, x=3.0))
+    c.update(air(2.0, x=6.0))
+    assert c.mission_finished and c.mission_seq == 1
+    assert c.messages[-1] == (mavlink.MAV_SEVERITY_INFO, "Mission finished, loitering")
+    c.set_mode(FlightMode.AUTO_LOITER, air(3.0, x=6.0))
+    assert c.set_mode(FlightMode.AUTO_MISSION, air(3.1, x=6.0)).accepted
+    assert c.mission_seq == 0 and c.mission_finished is False
+    assert c.update(air(3.2, x=6.0)).setpoint.position == (3.0, 0.0, -2.0)
+
+
+def test_set_current_on_a_finished_mission_continues_from_that_item():
+    c = flying_mission([local_item(0, NAV_WAYPOINT, 3.0, 0.0), local_item(1, NAV_WAYPOINT, 6.0, 0.0)])
+    c.update(air(1.0, x=3.0))
+    c.update(air(2.0, x=6.0))
+    assert c.mission_finished
+    assert c.set_mission_current(0, air(2.5, x=6.0)).accepted and c.mission_finished is False
+    assert c.update(air(2.6, x=6.0)).setpoint.position == (3.0, 0.0, -2.0)
+
+
+def test_a_return_item_on_the_ground_ends_the_mission_there():
+    from sitl_vehicle.mission import NAV_RETURN_TO_LAUNCH
+
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.set_mission([local_item(0, NAV_RETURN_TO_LAUNCH)], status(0))
+    assert c.set_mode(FlightMode.AUTO_MISSION, status(0)).accepted
+    assert c.mission_finished and c.landing                                  # at once: nothing to return from
+    assert not any(text.startswith("Mission finished") for _, text in c.messages)
+    assert c.arm(status(0)).accepted
+    out = c.update(status(0.1, armed=True))
+    assert c.mission_finished and out.mode is FlightMode.AUTO_MISSION and c.landing
+    assert math.isnan(out.setpoint.position[2]) and out.setpoint.velocity[2] > 0        # idles on the ground
+
+
+def test_a_land_item_without_coordinates_lands_at_once_where_the_last_item_was_reached():
+    c = flying_mission([local_item(0, NAV_WAYPOINT, 3.0, 0.0), local_item(1, NAV_LAND)])
+    sp = c.update(air(1.0, x=3.0)).setpoint
+    assert c.mission_seq == 1 and c.landing
+    assert sp.position[:2] == (3.0, 0.0) and math.isnan(sp.position[2]) and sp.velocity[2] == pytest.approx(0.7)
+    c.update(status(3.0, pos=(3.0, 0.0, 0.0), landed=True, armed=True))
+    assert c.mission_finished and list(c.mission_reached) == [0, 1]
+    assert c.messages[-1] == (mavlink.MAV_SEVERITY_INFO, "Mission finished, landed")
+
+
+def test_a_land_item_lands_on_its_coordinates_once_within_nav_acc_rad():
+    c = flying_mission([local_item(0, NAV_LAND, 4.0, 2.0)])
+    assert c.update(air(1.0)).setpoint.position == (4.0, 2.0, -2.0)         # fly there first, at this altitude
+    sp = c.update(air(5.0, x=4.05, y=2.0)).setpoint                         # 5 cm off: within NAV_ACC_RAD
+    assert c.landing and sp.position[:2] == (4.0, 2.0) and math.isnan(sp.position[2])
+
+
+def test_mission_items_are_reached_within_nav_acc_rad_and_held_for_exactly_param1():
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.params.set("NAV_ACC_RAD", 0.5)
+    c.set_mission([local_item(0, NAV_TAKEOFF, alt=2.0), local_item(1, NAV_WAYPOINT, 4.0, 0.0, hold_s=1.0)],
+                  status(0))
+    assert c.set_mode(FlightMode.AUTO_MISSION, status(0)).accepted and c.arm(status(0)).accepted
+    assert c.update(status(0.1, armed=True)).setpoint.position == (0.0, 0.0, -2.0)
+    sp = c.update(air(1.0, z=-1.5)).setpoint                                  # 0.5 m short: climbed
+    assert c.mission_seq == 1 and sp.position == (4.0, 0.0, -2.0)
+    c.update(air(2.0, x=3.5))                                                 # 0.5 m short: reached
+    assert list(c.mission_reached) == [0, 1] and not c.mission_finished
+    c.update(air(2.9, x=4.0))
+    assert not c.mission_finished
+    c.update(air(3.0, x=4.0))                                                 # held 1 s: done
+    assert c.mission_finished
+
+
+def test_a_mission_left_for_another_mode_does_not_advance_meanwhile():
+    c = flying_mission([local_item(0, NAV_WAYPOINT, 3.0, 0.0)])
+    c.set_mode(FlightMode.AUTO_LOITER, air(1.0))
+    out = c.update(air(2.0, x=3.0))                                           # flown over item 0 in Hold
+    assert out.mode is FlightMode.AUTO_LOITER and not c.mission_reached and not c.mission_finished

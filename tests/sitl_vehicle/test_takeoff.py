@@ -122,6 +122,35 @@ def test_takeoff_still_needs_arming():
     assert commander.takeoff(on_ground(), 3.0).result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
 
 
+def test_altitude_exactly_the_silent_margin_short_is_raised_silently():
+    commander = armed_commander(2.5)
+    assert commander.takeoff(on_ground(t=0.1), 2.5 - 0.1).accepted      # PX4 complains only beyond 10 cm
+    assert takeoff_texts(commander) == []
+    assert commander.update(on_ground(t=0.2)).setpoint.position == (0.0, 0.0, -2.5)
+
+
+def test_a_vehicle_exactly_at_the_takeoff_altitude_is_not_higher():
+    commander = armed_commander(2.5)
+    commander.update(flying(0.0, 0.0, -3.0, t=5.0))
+    assert commander.takeoff(flying(0.0, 0.0, -3.0, t=5.1), 3.0).accepted
+    assert takeoff_texts(commander) == []
+    assert commander.messages[-1] == (mavlink.MAV_SEVERITY_INFO, "Takeoff to 3.0 m above home")
+
+
+@pytest.mark.parametrize("where, done", [
+    ((4.0, -0.5, -2.5), True),       # 0.5 m low and 0.5 m off: exactly NAV_ACC_RAD on both
+    ((1.0, -1.0, -3.0), False),      # at the altitude, 3 m south of the target
+    ((4.0, 2.0, -3.0), False),       # at the altitude, 3 m east of the target
+    ((4.0, -1.0, -2.4), False),      # over the target, 0.6 m low
+])
+def test_takeoff_to_a_point_completes_within_nav_acc_rad_of_it(where, done):
+    commander = armed_commander(2.5)
+    commander.params.set("NAV_ACC_RAD", 0.5)
+    assert commander.takeoff(on_ground(t=0.1), 3.0, target_xy=(4.0, -1.0)).accepted
+    out = commander.update(flying(*where, t=4.0))
+    assert out.mode is (FlightMode.AUTO_LOITER if done else FlightMode.AUTO_TAKEOFF)
+
+
 # ------------------------------------------------------------------------------------- MAVLink edge
 class Edge:
     """The MAVLink interface over a commander, no sockets: ``takeoff(*params)`` runs NAV_TAKEOFF as it arrived
