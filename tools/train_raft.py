@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from companion.flow.raft.backend import (
     INPUT_SCALE_RANGE,
@@ -61,7 +62,7 @@ from tools.raft_data import (
 PROG = "flowgap-train-raft"
 TRAIN_KEYS = ("variant", "steps", "batch", "lr", "wdecay", "clip", "gamma", "iters", "width", "height", "crop",
               "crop_focus", "zoom", "seed", "jitter", "pairs_per_scene", "max_flow", "val_size", "val_iters",
-              "upsample", "distance", "precision", "head_lr_mult")
+              "upsample", "distance", "precision", "head_lr_mult", "boundary_weight")
 UPSAMPLE_MODES = {"centres": False, "corners": True}   # --upsample -> RaftConfig.upsample_align_corners
 
 
@@ -73,12 +74,33 @@ class CliError(Exception):
 # Loss and metrics
 # ---------------------------------------------------------------------------------------------------------
 
+def motion_boundaries(flow_gt: torch.Tensor, radius: int = 3, jump_px: float = 0.5) -> torch.Tensor:
+    """(B, 1, H, W) float mask of the pixels within ``radius`` of a ground-truth motion boundary: where the flow
+    jumps by more than ``jump_px`` (L1) between neighbours, as it does along the opening's outline, whose far
+    surface moves less than the wall around it."""
+    jump_x = (flow_gt[:, :, :, 1:] - flow_gt[:, :, :, :-1]).abs().sum(1) > jump_px
+    jump_y = (flow_gt[:, :, 1:, :] - flow_gt[:, :, :-1, :]).abs().sum(1) > jump_px
+    edge = torch.zeros_like(flow_gt[:, 0], dtype=torch.bool)
+    edge[:, :, 1:] |= jump_x
+    edge[:, :, :-1] |= jump_x
+    edge[:, 1:, :] |= jump_y
+    edge[:, :-1, :] |= jump_y
+    return F.max_pool2d(edge.unsqueeze(1).to(flow_gt.dtype), 2 * radius + 1, stride=1, padding=radius)
+
+
 def sequence_loss(predictions: list[torch.Tensor], flow_gt: torch.Tensor, valid: torch.Tensor,
-                  gamma: float = 0.8, max_flow: float = 400.0) -> tuple[torch.Tensor, float]:
-    """(loss, EPE of the last prediction) over valid pixels; prediction k of n weighted gamma**(n-1-k)."""
+                  gamma: float = 0.8, max_flow: float = 400.0,
+                  boundary_weight: float = 0.0) -> tuple[torch.Tensor, float]:
+    """(loss, EPE of the last prediction) over valid pixels; prediction k of n weighted gamma**(n-1-k).
+
+    ``boundary_weight`` > 0 counts the pixels near a motion boundary (``motion_boundaries``) 1 + that many times:
+    the opening's outline is a thin band of the frame that the mask's IoU depends on, and the plain mean over
+    pixels hardly sees it.  The loss stays a weighted mean (it is divided by the weights' sum)."""
     mag = torch.linalg.vector_norm(flow_gt, dim=1)
     mask = (valid > 0.5) & (mag < max_flow)
     maskf = mask.unsqueeze(1).to(flow_gt.dtype)
+    if boundary_weight > 0:
+        maskf = maskf * (1.0 + boundary_weight * motion_boundaries(flow_gt))
     denom = maskf.sum().clamp_min(1.0) * flow_gt.shape[1]
     n = len(predictions)
     loss = flow_gt.new_zeros(())
@@ -310,6 +332,8 @@ def train(args: argparse.Namespace) -> dict:
             config["distance"] = None      # nor stand further than 2.6 m from the wall
         if "precision" not in stored:
             config["precision"] = "fp32"   # nor train under bf16 autocast
+        if "boundary_weight" not in stored:
+            config["boundary_weight"] = 0.0  # nor weight the motion boundaries
         if "head_lr_mult" not in stored:
             config["head_lr_mult"] = 1.0   # nor give new heads a larger learning rate
 
@@ -380,7 +404,8 @@ def train(args: argparse.Namespace) -> dict:
         optimizer.zero_grad(set_to_none=True)
         with torch.autocast(device.type, torch.bfloat16, enabled=config["precision"] == "bf16"):
             output = model(img1, img2, iters=config["iters"], all_predictions=True)
-        loss, epe = sequence_loss(output.predictions, flow, valid, config["gamma"], config["max_flow"])
+        loss, epe = sequence_loss(output.predictions, flow, valid, config["gamma"], config["max_flow"],
+                                  config.get("boundary_weight", 0.0))
         loss_value = float(loss.detach())
         if not math.isfinite(loss_value):
             bar.close()
@@ -457,6 +482,27 @@ def eval_only(args: argparse.Namespace) -> dict:
     return result
 
 
+def export(args: argparse.Namespace) -> Path:
+    """Write weights (a run's final file or a checkpoint's, official or torchvision ones) as a flowgap weights
+    file in <out>, carrying the inference settings the companion is to run them with: the weights' own, with
+    what the command line changes (--val-iters, --refine-scale, --variational-levels, ...)."""
+    from companion.flow.raft.weights import save_flowgap_weights
+
+    loaded = read_weights(args.export)
+    variant = loaded.variant
+    model = build_model(variant, upsample_mode(loaded.upsample_align_corners))
+    load_weights_into(model, args.export, variant)
+    try:
+        settings = (loaded.inference or RAFT_DEFAULTS).replace(**inference_overrides(args))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = save_flowgap_weights(model, out / f"raft-{variant}-flowgap.pth", variant, inference=settings)
+    print(f"{PROG}: wrote {written} (raft-{variant}, {describe_settings(settings)})")
+    return Path(written)
+
+
 # ---------------------------------------------------------------------------------------------------------
 # Command line
 # ---------------------------------------------------------------------------------------------------------
@@ -481,6 +527,10 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--eval-only", metavar="WEIGHTS",
                    help="only print (and write <out>/eval.json) the validation EPE of these RAFT weights "
                         "(official, torchvision or flowgap), with DIS medium's EPE on the same pairs")
+    m.add_argument("--export", metavar="WEIGHTS",
+                   help="only write these weights (a run's weights or checkpoint) to <out>/raft-VARIANT-flowgap.pth "
+                        "with the inference settings given here (--val-iters N for the iterations, "
+                        "--variational-levels, ...; the rest the weights' own), as the companion will run them")
     m.add_argument("--resume", metavar="CHECKPOINT",
                    help="continue a run from one of its checkpoint-NNNNNN.pth files (its settings win)")
     m.add_argument("--init", metavar="WEIGHTS",
@@ -506,6 +556,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--precision", choices=("fp32", "bf16"), default="fp32",
                    help="bf16: the forward pass under bf16 autocast (weights, optimiser, correlation, upsampling "
                         "and loss stay float32); about 1.6x faster on CPUs with AVX512-BF16 or AMX")
+    t.add_argument("--boundary-weight", dest="boundary_weight", type=float, default=0.0, metavar="W",
+                   help="count pixels within 3 px of a ground-truth motion boundary (the opening's outline) "
+                        "1+W times in the loss (0: every pixel alike)")
     t.add_argument("--max-flow", dest="max_flow", type=float, default=400.0,
                    help="ignore ground-truth flow longer than this (px)")
     d = p.add_argument_group("data")
@@ -592,6 +645,8 @@ def _check(args: argparse.Namespace) -> None:
     for name, value in positive.items():
         if value <= 0:
             raise CliError(f"--{name} must be positive (got {value})")
+    if not (math.isfinite(args.boundary_weight) and args.boundary_weight >= 0):
+        raise CliError(f"--boundary-weight must be 0 or positive (got {args.boundary_weight})")
     for name, value in {"val-size": args.val_size, "val-every": args.val_every, "save-every": args.save_every,
                         "workers": args.workers}.items():
         if value < 0:
@@ -676,6 +731,8 @@ def main(argv: list[str] | None = None) -> int:
             torch.set_num_threads(args.threads)
         if args.eval_only:
             eval_only(args)
+        elif args.export:
+            export(args)
         else:
             train(args)
     except CliError as exc:

@@ -233,6 +233,42 @@ def test_sequence_loss_weights_iterations_and_ignores_invalid_pixels():
     assert float(loss2) == pytest.approx(1.0)
 
 
+def test_motion_boundaries_mark_the_band_around_a_flow_jump():
+    """A 5x5 block moving 2 px in a still 20x20 field: the jump lies between the block's pixels and their
+    neighbours outside it, so the pixels within 3 px (Chebyshev) of that ring of 7x7 pixels are marked."""
+    gt = torch.zeros(1, 2, 20, 20)
+    gt[0, 0, 5:10, 5:10] = 2.0
+    ring = np.zeros((20, 20), bool)
+    ring[4:11, 4:11] = True
+    ring[4:11, 4:11][1:-1, 1:-1] = False
+    ring[4, 4] = ring[4, 10] = ring[10, 4] = ring[10, 10] = False      # corners touch the block only diagonally
+    ring[5:10, 5:10] = True                                          # the block's own pixels at the jump ...
+    ring[6:9, 6:9] = False                                           # ... but not its inside
+    want = np.zeros((20, 20), bool)
+    for y, x in zip(*np.nonzero(ring)):
+        want[max(0, y - 3):y + 4, max(0, x - 3):x + 4] = True
+    got = train_raft.motion_boundaries(gt)[0, 0].numpy() > 0.5
+    assert (got == want).all()
+    # a smooth ramp (0.1 px per pixel, as a wall seen at an angle) has no boundary
+    ramp = torch.zeros(1, 2, 20, 20)
+    ramp[0, 0] = torch.arange(20.0) * 0.1
+    assert float(train_raft.motion_boundaries(ramp).sum()) == 0.0
+
+
+def test_boundary_weight_counts_the_band_more_and_leaves_the_epe_alone():
+    gt = torch.zeros(1, 2, 20, 20)
+    gt[0, 0, 5:10, 5:10] = 2.0
+    band = train_raft.motion_boundaries(gt)[0, 0] > 0.5
+    n, nb = 400, int(band.sum())
+    pred = gt.clone()
+    pred[0, 1][band] = 1.0                     # off by 1 px (one component) in the band only
+    plain, epe = train_raft.sequence_loss([pred], gt, torch.ones(1, 20, 20))
+    weighted, epe_w = train_raft.sequence_loss([pred], gt, torch.ones(1, 20, 20), boundary_weight=4.0)
+    assert float(plain) == pytest.approx(nb / (2 * n))
+    assert float(weighted) == pytest.approx(5 * nb / (2 * (n + 4 * nb)))
+    assert epe == pytest.approx(nb / n) and epe_w == pytest.approx(epe)
+
+
 @pytest.mark.parametrize("variant", ["small", "small-convex"])
 def test_training_steps_reduce_loss_on_a_fixed_batch(variant):
     torch.set_num_threads(2)
@@ -448,3 +484,20 @@ def test_unrecognised_weights_file_is_a_one_line_error(tmp_path, capsys):
     assert rc == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bogus.pth" in err[0]
+
+
+def test_export_writes_the_weights_with_the_inference_settings_given(tmp_path, capsys):
+    """--export: the same tensors, with the command line's inference settings over the weights' own."""
+    shipped = Path(__file__).resolve().parents[2] / "companion/flow/weights/raft-small-refined-flowgap.pth"
+    assert train_raft.main(["--export", str(shipped), "--val-iters", "2", "--variational-levels", "1",
+                            "-o", str(tmp_path)]) == 0
+    before, after = train_raft.read_weights(shipped), train_raft.read_weights(
+        tmp_path / "raft-small-refined-flowgap.pth")
+    assert after.variant == before.variant == "small-refined"
+    assert after.inference.iters == 2 and after.inference.variational_levels == 1
+    assert before.inference.iters == 3 and before.inference.variational_levels == 2     # the model card's
+    assert after.inference.variational_iters == before.inference.variational_iters     # kept
+    assert before.state_dict.keys() == after.state_dict.keys()
+    assert all(torch.equal(before.state_dict[k], after.state_dict[k]) for k in before.state_dict)
+    assert train_raft.main(["--export", str(tmp_path / "missing.pth"), "-o", str(tmp_path)]) == 2
+    assert "RAFT weights not found" in capsys.readouterr().err
