@@ -5,11 +5,13 @@ flow against the previous frame, detect the gap, filter the centroid (τ_c), and
 When centred and close, or when the step budget is spent, push through in 0.05 m increments (step 7).
 Every way out of the loop is a state: a lost link or a refused command ends in FAILED with the reason, after
 asking the vehicle to hold (or land) where it can; declining to fly through (an opening too small, one it cannot
-centre on, or none seen in N frames) ends in REFUSED, holding where it is.
+centre on, or none seen in N frames) ends in REFUSED, holding where it is, once a search has looked again from
+either side of the start (MissionConfig.search_shift_m) and found nothing it can pass.
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import enum
 import logging
@@ -80,6 +82,19 @@ class MissionConfig:
     # perception is done if that takes longer.  In lockstep perception costs no simulated time, so this is
     # what it costs; 0 suits the stop-and-go servo, which waits for a still vehicle before each frame.
     perception_latency_s: float = 0.0
+    # Refused (an opening too small, none seen, none centred on): look again before holding for good, from this
+    # far to one side of the start's axis (the refused opening's side first), then to the other, the refused ones
+    # set aside (companion.opening: avoid).  An opening out of the camera's view from the start is found this way
+    # (hard world, seed 41: five passable openings 41-53° off the start heading, 2.2-2.6 m to its side).  0: none.
+    search_shift_m: float = 1.5
+    search_move_timeout_s: float = 20.0  # wall (or lockstep) seconds to reach each point of the search
+    search_wall_turn_rad: float = math.radians(25.0)  # a look allows for a wall turned this far (the hard world: 20°)
+    search_yaw_margin_rad: float = math.radians(8.0)  # ... or, its turn measured, for that give or take this
+    search_reach_m: float = 1.2  # a look takes only openings this far across from where it looks from, and only
+                                 # seen clear in the frame it pushes on (no push on a tracked place alone)
+    search_walk_m: float = 1.0   # ... and starts this much further than the hold distance from it (room to walk
+                                 # for parallax before the hold)
+    search_wall_slack_m: float = 0.3  # ... and takes the wall no further than that bound plus this
 
 
 @dataclass
@@ -111,6 +126,10 @@ class Mission:
         self.servo = servo or ServoConfig()
         self.config = config or MissionConfig()
         self.tracker = tracker or ConfirmingCentroidFilter()
+        self._fresh_tracker = copy.deepcopy(self.tracker)  # each look of a search starts from it
+        self._frame_base = 0      # step number of the current look's first frame (looks number on from the last)
+        self._steps_before = 0    # servo steps of the looks before this one
+        self._wall_seen = None    # (forward, right, turn) of the wall's face as last measured (m, m, rad or None)
         # Once the wall's distance is known, the opening's clear centre is tracked where it is in the world
         # (companion.opening): a frame without a detection then steers by the vehicle's own motion instead of
         # repeating the last step (measured: re-applied 0.25 m steps towards a stale image position ran a
@@ -144,7 +163,7 @@ class Mission:
             self.link.start_offboard(start, self.yaw)
             self._recorded_setpoint(start)
             self._enter(State.SERVO)
-            waypoint, bias, wall_distance = self._servo(start)
+            waypoint, bias, wall_distance = self._servo_searching(start)
             self._enter(State.TRAVERSE)
             self._traverse(waypoint, bias, wall_distance, self.result.far_distance_m)
             if self.config.finish == "land":
@@ -189,19 +208,82 @@ class Mission:
                 attempt += 1
 
     # --------------------------------------------------------------------------------- servo
-    def _servo(self, start):
-        """Servo steps until push; returns (last waypoint, lateral/vertical bias, wall distance)."""
-        cfg = self.servo
+    def _servo_searching(self, start):
+        """Servo on an opening; refused, look again from either side of the start's axis (``search_shift_m``,
+        the refused opening's side first), the refused ones set aside; returns what :meth:`_servo` returns, or
+        raises the combined refusal."""
+        try:
+            return self._servo(start)
+        except Refusal as exc:
+            first = exc
+        shift = self.config.search_shift_m
+        if shift <= 0:
+            raise first
+        ahead, axis = self._forward(start), self._across(start)[0]
+        seen = first.place[0] if first.place is not None else self._across(self.link.telemetry.position)[0]
+        side = 1.0 if seen >= axis else -1.0
+        avoid = [first.place] if first.place is not None else []
+        looks = []
+        for s in (side, -side):
+            right = axis + s * shift
+            where = f"{shift:.1f} m {'right' if s > 0 else 'left'} of the start"
+            # The wall measured so far bounds the look: a turned wall is nearer on one side (allowed for up to
+            # search_wall_turn_rad), and beyond the wall's end the flow shows only what is behind it (measured:
+            # a vehicle walked past a wall's end, then stepped sideways into it).
+            prior = None
+            if self._wall_seen is not None:
+                wall_forward, wall_right, wall_yaw = self._wall_seen
+                across = right - wall_right
+                prior = wall_forward - abs(across) * math.tan(self.config.search_wall_turn_rad)
+                if wall_yaw is not None:    # measured: its turn, give or take search_yaw_margin_rad
+                    prior = max(prior, wall_forward + across * math.tan(wall_yaw)
+                                - abs(across) * math.tan(self.config.search_yaw_margin_rad))
+            forward = ahead if prior is None else prior - self.servo.hold_distance_m - self.config.search_walk_m
+            note = f"refused ({first}); looking again from {where}"
+            log.info("%s", note)
+            self._event(note, "WARN")
+            # back first (away from the wall, the way it came, behind the start if need be), then across
+            self._move_to(self._from_heading(min(forward, self._forward(self.link.telemetry.position)),
+                                             self._across(self.link.telemetry.position)[0], start[2]))
+            look = self._from_heading(forward, right, start[2])
+            self._move_to(look)
+            self.tracker = copy.deepcopy(self._fresh_tracker)
+            self._steps_before = self.result.servo_steps
+            try:
+                return self._servo(look, tuple(avoid), prior, (right, self.config.search_reach_m))
+            except Refusal as exc:
+                looks.append(f"from {where}: {exc}")
+                if exc.place is not None:
+                    avoid.append(exc.place)
+        raise Refusal(f"{first}; looked again " + "; ".join(looks))
+
+    def _move_to(self, point) -> None:
+        self._send(point)
+        self.link.wait_position(point, self.config.arrival_tolerance_m, self.config.search_move_timeout_s,
+                                self.config.arrival_speed_mps)
+
+    def _from_heading(self, forward: float, right: float, down: float) -> tuple[float, float, float]:
+        """NED from coordinates along and across the initial heading (the inverse of _forward and _across)."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return forward * c - right * s, forward * s + right * c, down
+
+    def _servo(self, start, avoid: tuple = (), wall_prior: float | None = None, reach=None):
+        """Servo steps until push; returns (last waypoint, lateral/vertical bias, wall distance).  ``avoid``: places
+        of openings refused before; ``wall_prior``: the nearest the wall's face can be (forward coordinate), from
+        earlier looks: no blind step goes nearer than the hold distance to it; ``reach``: (right, metres), a look's
+        bound on the openings it takes (companion.opening), and then no push without a clear sighting."""
+        cfg = self.servo if reach is None else dataclasses.replace(self.servo, roomy_tolerance_m=math.inf)
         width, height = self.camera.width, self.camera.height
         prev = self.camera.capture()
         # The autopilot's estimates at each frame's time stamp, as a real companion has them (the frame's own
         # pose is the simulator's truth, used only to render and to log).
         prev_position, prev_attitude = self._estimates_at(prev.time_s)
-        self._log_frame(0, prev, prev_position, prev_attitude)
-        self.runlog.save_images(0, rgb=prev.rgb)
+        base = self._frame_base
+        self._log_frame(base, prev, prev_position, prev_attitude)
+        self.runlog.save_images(base, rgb=prev.rgb)
         if self.recording is not None:
-            self.recording.frame(0, prev.time_s, prev.rgb, None, None, position_true=prev.position,
-                                 attitude_true=prev.attitude, text="step 0: the first frame")
+            self.recording.frame(base, prev.time_s, prev.rgb, None, None, position_true=prev.position,
+                                 attitude_true=prev.attitude, text=f"step {base}: the first frame")
         waypoint = start
         step = servo_step(None, 0.0, 0, width, height, cfg)
         wall_distance = None
@@ -209,10 +291,12 @@ class Mission:
         rough_estimates: list[float] = []  # ... and from frames without a gap too (a safety bound only)
         far_estimates: list[float] = []   # ... and of the far surface seen through the opening
         yaw_estimates: list[float] = []   # how far the wall is turned against the heading (rad)
-        openings = OpeningTracker(cfg, self.openings, self.tracker)
+        openings = OpeningTracker(cfg, self.openings, self.tracker, avoid, reach)
         focal = float(self.camera.K[0, 0])
         ever_seen = False
         for k in range(cfg.step_budget):
+            n = base + k + 1      # the step's number in the flight's logs
+            self._frame_base = n + 1
             t_step = self.clock.now()
             delta = heading_to_ned(step.delta_heading, self.yaw)
             waypoint = (waypoint[0] + delta[0], waypoint[1] + delta[1], waypoint[2] + delta[2])
@@ -229,7 +313,7 @@ class Mission:
             seen = perceive(prev.rgb, frame.rgb, prev_attitude, attitude, self.camera.K, self.flow, self.detector,
                             self.derotate)
             flow, top = seen.flow, seen.detection
-            self._log_frame(k + 1, frame, position, attitude)
+            self._log_frame(n, frame, position, attitude)
             # Forward flow lives on the first frame's pixels: so do the masks, which are placed and measured from
             # where that frame was taken (measured: scaled from the second frame's distance, every opening came
             # out 10 % small at a 0.18 m step from 1.6 m, and a sideways step misplaced it by the step).
@@ -254,6 +338,11 @@ class Mission:
             # A distance enters the push decision only once three measurements agree on a median.
             enough = len(wall_estimates) >= self.config.min_wall_measurements
             wall_distance = float(np.median(wall_estimates)) - here if enough else None
+            if wall_distance is not None and wall_prior is not None and \
+                    wall_distance > wall_prior - here + self.config.search_wall_slack_m:
+                # a look's reading well beyond where earlier looks put the wall is not the wall (measured: by a
+                # wall's end, readings of 1.6-3.3 m for a wall 0.7 m ahead walked a vehicle into it)
+                wall_distance = wall_prior - here
             axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), self.camera.K, prev_attitude[0],
                                 prev_attitude[1])
             seen_from = self._forward(prev_position)
@@ -269,7 +358,7 @@ class Mission:
                 log.info("%s", sight.note)
                 self._event(sight.note)
             if sight.refusal:
-                raise Refusal(sight.refusal)
+                raise Refusal(sight.refusal, openings.world.used)
             detection = sight.detection if sight.detection is not None else top
             used = sight.target_px
             ever_seen |= bool(found)
@@ -281,6 +370,10 @@ class Mission:
             ahead = wall_distance
             if ahead is None and len(rough_estimates) >= self.config.min_wall_measurements:
                 ahead = float(np.median(rough_estimates[-self.config.min_wall_measurements:])) - here
+            if ahead is not None:
+                self._wall_seen = (here + ahead, self._across(position)[0], wall_yaw)
+            if wall_prior is not None:
+                ahead = wall_prior - here if ahead is None else min(ahead, wall_prior - here)
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
                 raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on")
             if sight.offset_m is None:
@@ -296,20 +389,20 @@ class Mission:
                                         normalised_error(used, width, height), sight.clearance_here_m,
                                         sight.sightings)
             self.clock.sleep_until(t_frame + self.config.perception_latency_s)
-            self.result.servo_steps = k + 1
+            self.result.servo_steps = self._steps_before + k + 1
             flow_bgr = flow_to_colour(flow, bgr=True)
-            self.runlog.save_images(k + 1, rgb=frame.rgb, flow_bgr=flow_bgr, mask=detection.mask)
+            self.runlog.save_images(n, rgb=frame.rgb, flow_bgr=flow_bgr, mask=detection.mask)
             state = ("push" if next_step.push else "aligned" if next_step.aligned else
                      "close" if next_step.close else "servo") + (f"; {sight.note}" if sight.note else "")
             shown = None if used is None else tilted_pixel(used, self.camera.K, prev_attitude[0], prev_attitude[1])
-            row = StoryRow(k + 1, frame.rgb, flow_bgr[:, :, ::-1], detection.mask, detection.centroid, shown,
-                           step_text(k + 1, next_step.error, next_step.delta_heading, wall_distance, state))
+            row = StoryRow(n, frame.rgb, flow_bgr[:, :, ::-1], detection.mask, detection.centroid, shown,
+                           step_text(n, next_step.error, next_step.delta_heading, wall_distance, state))
             self.storyboard.add(row)
             if self.recording is not None:
                 self.recording.frame(row.step, frame.time_s, row.frame, row.flow_rgb, row.mask, row.raw, row.used,
                                      frame.position, frame.attitude, next_step.error, wall_distance, row.text)
             self.runlog.decision({
-                "step": k + 1, "t_wall_s": time.monotonic() - self._t0, "t_clock_s": self.clock.now() - self._t0_clock,
+                "step": n, "t_wall_s": time.monotonic() - self._t0, "t_clock_s": self.clock.now() - self._t0_clock,
                 "frame_time_s": frame.time_s,
                 "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
                 "centroid_raw": detection.centroid, "openings": len(found), "centroid_used": used,
@@ -323,7 +416,7 @@ class Mission:
                 "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": seen.flow_ms,
                            "detect_ms": seen.detect_ms},
             })
-            log.info("step %d: centroid %s used %s area %.3f error %s wall %.2f m%s", k + 1,
+            log.info("step %d: centroid %s used %s area %.3f error %s wall %.2f m%s", n,
                      _fmt(detection.centroid), _fmt(used), area_frac, _fmt(next_step.error),
                      measured if measured is not None else math.nan, " → push" if next_step.push else "")
             if not ever_seen and k + 1 >= self.config.no_gap_limit:
@@ -338,7 +431,7 @@ class Mission:
                 raise Refusal(f"could not centre on the opening within {cfg.step_budget} steps (still "
                               f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed"
                               f"{'' if step.aligned is False else ', not seen clear in the last frame'}): "
-                              "not flying through")
+                              "not flying through", openings.world.used)
         self.result.wall_distance_m = wall_distance
         here = self._forward(prev_position)
         if wall_distance is None and wall_estimates:  # fewer than the minimum: still better than nothing
@@ -439,7 +532,12 @@ class Mission:
 
 class Refusal(RuntimeError):
     """The companion declines to fly through (an opening too small, one it cannot centre on, or none seen); the
-    reason names the numbers behind the decision."""
+    reason names the numbers behind the decision, and ``place`` where the refused opening is on the wall (right,
+    down across the heading, metres; None when none was placed)."""
+
+    def __init__(self, reason: str, place=None):
+        super().__init__(reason)
+        self.place = place
 
 
 def _fmt(value) -> str:

@@ -16,7 +16,9 @@ two:
   mask misses part of an opening far more often than it takes in wall: on hard-world views a single estimate
   was at most 0.009 m over the truth in nine cases of ten, but down to 0.042 m under it); once the wall is within
   ``decide_within_m`` and ``min_estimates`` such estimates say that the body sphere and its margin do not fit,
-  another candidate that fits is taken instead (once, and said so), or the opening is refused with the numbers.
+  another candidate that fits is taken instead (once, and said so), or the opening is refused with the numbers;
+- openings refused before (``avoid``: their places on the wall) are no candidates once the wall's distance places
+  what is seen (the mission's search for another opening).
 
 The clear radius of what is seen through an opening in a wall of thickness t is bounded by the opening's far
 edge, t beyond the wall's face (the tunnel's inner faces count as wall), so it is scaled by that depth.
@@ -88,8 +90,15 @@ def candidates_in(detection, K: np.ndarray, attitude) -> list[Candidate]:
 
 class OpeningTracker:
     def __init__(self, servo: ServoConfig | None = None, config: OpeningConfig | None = None,
-                 pixel_tracker=None) -> None:
+                 pixel_tracker=None, avoid: tuple[Point, ...] = (), reach: tuple[float, float] | None = None
+                 ) -> None:
         self.servo = servo or ServoConfig()
+        # places (right, down, metres) of openings already judged too small: a sighting placed within the world
+        # gate of one is not a candidate (a search looks for another opening, not the refused one again); and
+        # with ``reach`` (right, metres), none placed further across than that from there (a search looks ahead
+        # of where it looks from, not along the wall towards its end, where the void beside it showed "openings")
+        self.avoid = tuple(avoid)
+        self.reach = reach
         self.config = config = config or OpeningConfig()
         self.pixels = pixel_tracker if pixel_tracker is not None else ConfirmingCentroidFilter(
             TrackingConfig(config.tau_c_px))
@@ -145,6 +154,12 @@ class OpeningTracker:
         def place(target_px: Point) -> Point:
             off = metric_offset(normalised_error(target_px, width, height), width, height, focal_px, wall_distance_m)
             return across_m[0] + off[0], across_m[1] + off[1]
+        if wall_distance_m is not None:
+            if self.avoid:
+                candidates = [c for c in candidates
+                              if all(math.dist(place(c.target_px), a) > self.config.world_gate_m for a in self.avoid)]
+            if self.reach is not None:
+                candidates = [c for c in candidates if abs(place(c.target_px)[0] - self.reach[0]) <= self.reach[1]]
         note = None
         if self.pixels.used is None and len(candidates) > 1 and not self._announced:
             best = max(candidates, key=lambda c: c.detection.clear_radius_px)

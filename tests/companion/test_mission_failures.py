@@ -148,12 +148,48 @@ def test_no_opening_seen_in_eight_frames_is_a_refusal_that_holds(tmp_path):
     link = ScriptedLink()
     mission = Mission(link, StillCamera(), make_flow_backend("dis", preset="fast"), get_detector("parallax"),
                       RunLog(tmp_path, images=False),
-                      config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3))
+                      config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3, search_shift_m=0.0))
     result = mission.run()
     mission.runlog.close()
     assert result.state is State.REFUSED
     assert result.reason == "no opening found in 8 frames: nothing seen to fly through"
     assert link.calls[-1] == "hold" and link.calls.count("setpoint") >= 8
+
+
+def test_refused_it_looks_again_from_either_side_of_the_start_before_holding(tmp_path):
+    """The search (MissionConfig.search_shift_m): refused from the start, the vehicle looks again from 1.5 m to
+    one side of the start's axis and then the other, each a full look of its own, and holds only when all three
+    refused; the reason names each look."""
+    from companion.flow import make_flow_backend
+    from companion.gap import get_detector
+
+    class Recording(ScriptedLink):
+        def __init__(self):
+            super().__init__()
+            self.setpoints = []
+
+        def set_position_target(self, position, yaw) -> None:
+            super().set_position_target(position, yaw)
+            self.setpoints.append(tuple(position))
+
+    link = Recording()
+    mission = Mission(link, StillCamera(), make_flow_backend("dis", preset="fast"), get_detector("parallax"),
+                      RunLog(tmp_path, images=False),
+                      config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3,
+                                           estimate_wait_s=0.01))   # scripted telemetry has no history to wait for
+    result = mission.run()
+    mission.runlog.close()
+    nothing = "no opening found in 8 frames: nothing seen to fly through"
+    assert result.state is State.REFUSED and link.calls[-1] == "hold"
+    assert result.reason == (f"{nothing}; looked again from 1.5 m right of the start: {nothing}; "
+                             f"from 1.5 m left of the start: {nothing}")
+    assert result.servo_steps == 3 * 8
+    # heading north (yaw 0): right is east.  Each look starts at the start's northing, 1.5 m east, then west
+    # (no wall was measured: the start's own distance), and walks north from there
+    looks = [p for p in link.setpoints if abs(abs(p[1]) - 1.5) < 1e-9 and abs(p[0]) < 1e-9]
+    assert [p[1] for p in looks] == [1.5, 1.5, -1.5]     # east; back there after the walk; then west
+    east = [p for p in link.setpoints if p[1] == 1.5]
+    assert len(east) >= 8 and max(p[0] for p in east) > 1.0
 
 
 def test_a_vehicle_that_disarmed_on_the_ground_before_takeoff_got_through_is_armed_again(tmp_path):

@@ -149,3 +149,29 @@ def test_a_tracked_opening_unmatched_in_the_image_is_found_again_where_it_is_on_
     far = [rect(250 + du, 100, 300 + du, 150) for du in (0, 25, 0, 25, 0, 25)]
     assert all(other.observe([cand(d)], (0.0, 0.0), 1.0, F, W, H).detection is None for d in far)
 
+
+
+def test_a_search_sets_refused_openings_aside_and_takes_none_beyond_its_reach():
+    """Once the wall's distance places what is seen, an opening placed within the world gate of a refused one is
+    no candidate, nor one further across than ``reach`` from where the look is taken."""
+    left, right = rect(20, 80, 120, 170), rect(190, 70, 310, 180)     # both wide at 1.5 m, the right one wider
+    distance = 1.5
+
+    def across(det):               # its clear centre's place (right of the vehicle), metres
+        return (det.clear_centre[0] - (W - 1) / 2) * distance / F
+
+    plain = OpeningTracker()
+    for _ in range(3):
+        seen = plain.observe([cand(left), cand(right)], (0.0, 0.0), distance, F, W, H)
+    assert seen.detection is right                                     # the wider one, unless set aside
+    refused_right = (across(right), (right.clear_centre[1] - (H - 1) / 2) * distance / F)
+    avoiding = OpeningTracker(avoid=(refused_right,))
+    for _ in range(3):
+        seen = avoiding.observe([cand(left), cand(right)], (0.0, 0.0), distance, F, W, H)
+    assert seen.detection is left and seen.offset_m[0] == pytest.approx(across(left), abs=0.02)
+    # a look from 1.5 m right: only openings within 1.2 m across of it count; the left one is 2.2 m away
+    assert abs(across(left) - 1.5) > 1.2
+    reaching = OpeningTracker(reach=(1.5, 1.2))
+    for _ in range(3):
+        seen = reaching.observe([cand(left)], (0.0, 0.0), distance, F, W, H)
+    assert seen.detection is None and seen.offset_m is None
