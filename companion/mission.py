@@ -264,8 +264,7 @@ class Mission:
 
     def _from_heading(self, forward: float, right: float, down: float) -> tuple[float, float, float]:
         """NED from coordinates along and across the initial heading (the inverse of _forward and _across)."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        return forward * c - right * s, forward * s + right * c, down
+        return heading_to_ned((forward, right, down), self.yaw)
 
     def _servo(self, start, avoid: tuple = (), wall_prior: float | None = None, reach=None):
         """Servo steps until push; returns (last waypoint, lateral/vertical bias, wall distance).  ``avoid``: places

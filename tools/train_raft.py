@@ -453,20 +453,28 @@ def train(args: argparse.Namespace) -> dict:
     return summary
 
 
+def _weights_as_run(path: str | Path, args: argparse.Namespace):
+    """(weights, model holding them, their layout, inference settings) for ``path``: the model built as the weights
+    were trained, whatever --upsample says, and the weights' own settings (their model card's) with what the
+    command line changes."""
+    loaded = read_weights(path)
+    model = build_model(loaded.variant, upsample_mode(loaded.upsample_align_corners))
+    layout = load_weights_into(model, path, loaded.variant)
+    try:
+        settings = (loaded.inference or RAFT_DEFAULTS).replace(**inference_overrides(args))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    return loaded, model, layout, settings
+
+
 def eval_only(args: argparse.Namespace) -> dict:
     device = _device(args.device)
-    loaded = read_weights(args.eval_only)
+    loaded, model, layout, settings = _weights_as_run(args.eval_only, args)
     variant, upsample = loaded.variant, upsample_mode(loaded.upsample_align_corners)
-    model = build_model(variant, upsample)      # as the weights were trained, whatever --upsample says
-    layout = load_weights_into(model, args.eval_only, variant)
     model.to(device).eval()
     size = args.val_size or DEFAULT_VALIDATION_SIZE
     distance = tuple(args.distance) if args.distance else None
     pairs = validation_set(size, args.width, args.height, seed=args.val_seed, distance=distance)
-    try:   # the weights' own settings (their model card's), with what the command line changes
-        settings = (loaded.inference or RAFT_DEFAULTS).replace(**inference_overrides(args))
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
     result = evaluate(model, pairs, settings, device, with_dis=True)
     result = {"weights": str(args.eval_only), "layout": layout, "variant": variant, "upsample": upsample,
               "seed": args.val_seed, **({"distance": list(distance)} if distance else {}), **result}
@@ -488,14 +496,8 @@ def export(args: argparse.Namespace) -> Path:
     what the command line changes (--val-iters, --refine-scale, --variational-levels, ...)."""
     from companion.flow.raft.weights import save_flowgap_weights
 
-    loaded = read_weights(args.export)
+    loaded, model, _, settings = _weights_as_run(args.export, args)
     variant = loaded.variant
-    model = build_model(variant, upsample_mode(loaded.upsample_align_corners))
-    load_weights_into(model, args.export, variant)
-    try:
-        settings = (loaded.inference or RAFT_DEFAULTS).replace(**inference_overrides(args))
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     written = save_flowgap_weights(model, out / f"raft-{variant}-flowgap.pth", variant, inference=settings)
