@@ -175,14 +175,19 @@ def test_data_link_loss_failsafe_after_com_dl_loss_t(commander, action, mode):
     assert commander.update(at(12.1, 1.0, 0.0, -2.0)).mode is mode      # PX4 stays in the failsafe mode
 
 
-def test_data_link_loss_holds_com_fail_act_t_first_and_the_worse_of_two_losses_wins(commander):
-    from sitl_vehicle.manual import Sticks
-
+def _hold_with_return_on_link_loss_and_land_on_stick_loss(commander) -> None:
+    """Armed and holding at 2 m, a ground station heard at t=0; data-link loss acts Return, manual-control loss Land."""
     commander.params.set("NAV_DLL_ACT", 2.0)                            # Return
     commander.params.set("NAV_RCL_ACT", 3.0)                            # Land
     commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
     commander.gcs_heartbeat(0.0)
     commander.set_mode(FlightMode.AUTO_LOITER, at(0.0, 0.0, 0.0, -2.0))
+
+
+def test_data_link_loss_holds_com_fail_act_t_first_and_the_worse_of_two_losses_wins(commander):
+    from sitl_vehicle.manual import Sticks
+
+    _hold_with_return_on_link_loss_and_land_on_stick_loss(commander)
     out = commander.update(at(10.5, 0.0, 0.0, -2.0))                   # data link lost: Return in 5 s
     assert out.mode is FlightMode.AUTO_LOITER and commander.failsafe
     assert commander.messages[-1][1] == "Failsafe: data link lost, switching to Return in 5 s (Hold until then)"
@@ -574,11 +579,7 @@ def test_data_link_loss_needs_a_ground_station_first_and_its_messages_are_graded
 def test_a_second_loss_at_the_deadline_reports_the_seconds_left_rounded(commander):
     from sitl_vehicle.manual import Sticks
 
-    commander.params.set("NAV_DLL_ACT", 2.0)                            # Return
-    commander.params.set("NAV_RCL_ACT", 3.0)                            # Land
-    commander.arm(at(0.0, 0.0, 0.0, 0.0, landed=True))
-    commander.gcs_heartbeat(0.0)
-    commander.set_mode(FlightMode.AUTO_LOITER, at(0.0, 0.0, 0.0, -2.0))
+    _hold_with_return_on_link_loss_and_land_on_stick_loss(commander)
     commander.update(at(10.5, 0.0, 0.0, -2.0))                          # data link lost: Return at 15.5
     assert commander.messages[-1] == (CRITICAL, "Failsafe: data link lost, switching to Return in 5 s "
                                                 "(Hold until then)")

@@ -245,7 +245,7 @@ def test_motion_boundaries_mark_the_band_around_a_flow_jump():
     ring[5:10, 5:10] = True                                          # the block's own pixels at the jump ...
     ring[6:9, 6:9] = False                                           # ... but not its inside
     want = np.zeros((20, 20), bool)
-    for y, x in zip(*np.nonzero(ring)):
+    for y, x in zip(*np.nonzero(ring), strict=True):
         want[max(0, y - 3):y + 4, max(0, x - 3):x + 4] = True
     got = train_raft.motion_boundaries(gt)[0, 0].numpy() > 0.5
     assert (got == want).all()
