@@ -61,6 +61,23 @@ class State(enum.Enum):
     FAILED = "failed"
 
 
+def search_wall_bound(walls: list[tuple], right: float, turn_rad: float, yaw_margin_rad: float) -> float | None:
+    """The nearest the wall's face can be (forward coordinate) at ``right`` across the heading, by every look's
+    last sight of it (forward, right, measured turn or None): a turned wall is nearer on one side (allowed for
+    up to ``turn_rad``, or, its turn measured, for that give or take ``yaw_margin_rad``), and beyond the wall's
+    end the flow shows only what is behind it (measured: a vehicle walked past a wall's end, then stepped
+    sideways into it).  The nearest of the looks' bounds counts: one taken far across, or with a turn measured
+    wrong, may put the wall too far (measured, hard world seed 41: a third look began 0.3 m from the wall)."""
+    bounds = []
+    for wall_forward, wall_right, wall_yaw in walls:
+        across = right - wall_right
+        bound = wall_forward - abs(across) * math.tan(turn_rad)
+        if wall_yaw is not None:
+            bound = max(bound, wall_forward + across * math.tan(wall_yaw) - abs(across) * math.tan(yaw_margin_rad))
+        bounds.append(bound)
+    return min(bounds) if bounds else None
+
+
 @dataclass(frozen=True)
 class MissionConfig:
     altitude_m: float = 1.5  # takeoff altitude above home
@@ -77,6 +94,8 @@ class MissionConfig:
     takeoff_attempts: int = 3  # arm + takeoff rounds when the vehicle disarms on the ground in between
     no_gap_limit: int = 8  # servo steps without any gap ever seen before giving up
     min_wall_measurements: int = 3  # flow-based wall distances needed before they steer the push
+    min_baseline_m: float = 0.02  # a frame pair whose camera moved less than this is not looked at (no parallax:
+                                  # at 1 m from a wall 1 m before its background, about 3 px of contrast)
     finish: str = "hold"  # after the traversal: "hold" or "land"
     # Camera-to-setpoint latency: the next waypoint is sent this long after its frame was taken, or once
     # perception is done if that takes longer.  In lockstep perception costs no simulated time, so this is
@@ -219,6 +238,7 @@ class Mission:
         shift = self.config.search_shift_m
         if shift <= 0:
             raise first
+        walls = [self._wall_seen] if self._wall_seen is not None else []   # each look's last sight of the wall
         ahead, axis = self._forward(start), self._across(start)[0]
         seen = first.place[0] if first.place is not None else self._across(self.link.telemetry.position)[0]
         side = 1.0 if seen >= axis else -1.0
@@ -227,19 +247,11 @@ class Mission:
         for s in (side, -side):
             right = axis + s * shift
             where = f"{shift:.1f} m {'right' if s > 0 else 'left'} of the start"
-            # The wall measured so far bounds the look: a turned wall is nearer on one side (allowed for up to
-            # search_wall_turn_rad), and beyond the wall's end the flow shows only what is behind it (measured:
-            # a vehicle walked past a wall's end, then stepped sideways into it).
-            prior = None
-            if self._wall_seen is not None:
-                wall_forward, wall_right, wall_yaw = self._wall_seen
-                across = right - wall_right
-                prior = wall_forward - abs(across) * math.tan(self.config.search_wall_turn_rad)
-                if wall_yaw is not None:    # measured: its turn, give or take search_yaw_margin_rad
-                    prior = max(prior, wall_forward + across * math.tan(wall_yaw)
-                                - abs(across) * math.tan(self.config.search_yaw_margin_rad))
+            prior = search_wall_bound(walls, right, self.config.search_wall_turn_rad,
+                                      self.config.search_yaw_margin_rad)
             forward = ahead if prior is None else prior - self.servo.hold_distance_m - self.config.search_walk_m
-            note = f"refused ({first}); looking again from {where}"
+            note = f"refused ({first}); looking again from {where}" + (
+                "" if prior is None else f", {prior - forward:.2f} m before the nearest the wall can be there")
             log.info("%s", note)
             self._event(note, "WARN")
             # back first (away from the wall, the way it came, behind the start if need be), then across
@@ -249,10 +261,13 @@ class Mission:
             self._move_to(look)
             self.tracker = copy.deepcopy(self._fresh_tracker)
             self._steps_before = self.result.servo_steps
+            self._wall_seen = None
             try:
                 return self._servo(look, tuple(avoid), prior, (right, self.config.search_reach_m))
             except Refusal as exc:
                 looks.append(f"from {where}: {exc}")
+                if self._wall_seen is not None:
+                    walls.append(self._wall_seen)
                 if exc.place is not None:
                     avoid.append(exc.place)
         raise Refusal(f"{first}; looked again " + "; ".join(looks))
@@ -267,10 +282,11 @@ class Mission:
         return heading_to_ned((forward, right, down), self.yaw)
 
     def _servo(self, start, avoid: tuple = (), wall_prior: float | None = None, reach=None):
-        """Servo steps until push; returns (last waypoint, lateral/vertical bias, wall distance).  ``avoid``: places
-        of openings refused before; ``wall_prior``: the nearest the wall's face can be (forward coordinate), from
-        earlier looks: no blind step goes nearer than the hold distance to it; ``reach``: (right, metres), a look's
-        bound on the openings it takes (companion.opening), and then no push without a clear sighting."""
+        """Servo steps until push; returns (where the push starts, lateral/vertical bias, wall distance).
+        ``avoid``: places of openings refused before; ``wall_prior``: the nearest the wall's face can be (forward
+        coordinate), from earlier looks: no blind step goes nearer than the hold distance to it; ``reach``: (right,
+        metres), a look's bound on the openings it takes (companion.opening), and then no push without a clear
+        sighting."""
         cfg = self.servo if reach is None else dataclasses.replace(self.servo, roomy_tolerance_m=math.inf)
         width, height = self.camera.width, self.camera.height
         prev = self.camera.capture()
@@ -309,8 +325,12 @@ class Mission:
             t_frame = self.clock.now()
             frame = self.camera.capture()
             position, attitude = self._estimates_at(frame.time_s)
+            moved = math.dist(prev_position, position)
+            # measured (hard world, seed 43): a step shorter than the arrival tolerance "arrived" at once, and a
+            # pair 0.01 m apart showed a 61 % "opening" 0.97 m away; the vehicle pushed into the wall
+            still = moved < self.config.min_baseline_m
             seen = perceive(prev.rgb, frame.rgb, prev_attitude, attitude, self.camera.K, self.flow, self.detector,
-                            self.derotate)
+                            self.derotate, moved, self.config.min_baseline_m)
             flow, top = seen.flow, seen.detection
             self._log_frame(n, frame, position, attitude)
             # Forward flow lives on the first frame's pixels: so do the masks, which are placed and measured from
@@ -318,7 +338,6 @@ class Mission:
             # out 10 % small at a 0.18 m step from 1.6 m, and a sideways step misplaced it by the step).
             candidates = candidates_in(top, self.camera.K, prev_attitude)
             found = [c.detection for c in candidates]
-            moved = math.dist(prev_position, position)
             # Only with a detected gap: its mask (every opening's) keeps the far pixels out of the wall's depth
             # statistic (measured: without one, readings of 0.7–0.9 m for a wall 2.8 m away pushed far too early).
             gaps = np.logical_or.reduce([d.mask for d in found]) if found else None
@@ -329,7 +348,7 @@ class Mission:
             if measured is not None:
                 wall_estimates.append(here + measured)
             # Without a gap the wall is still measured, for one purpose only: not to walk into it blind.
-            rough = measured if found else wall_distance_from_flow(flow, None, moved)
+            rough = measured if found or still else wall_distance_from_flow(flow, None, moved)
             if rough is not None and 0.3 <= rough <= 10.0:
                 rough_estimates.append(here + rough)
             # Each measurement places the wall in the world; their median is robust to the bad ones, and
@@ -369,10 +388,12 @@ class Mission:
             ahead = wall_distance
             if ahead is None and len(rough_estimates) >= self.config.min_wall_measurements:
                 ahead = float(np.median(rough_estimates[-self.config.min_wall_measurements:])) - here
-            if ahead is not None:
-                self._wall_seen = (here + ahead, self._across(position)[0], wall_yaw)
             if wall_prior is not None:
                 ahead = wall_prior - here if ahead is None else min(ahead, wall_prior - here)
+            if ahead is not None:
+                # bounded as the look's own steps are: a look's reading beyond its bound (measured: by a wall's
+                # end, rough readings of what lies behind it) would start the next look too near the wall
+                self._wall_seen = (here + ahead, self._across(position)[0], wall_yaw)
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
                 raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on")
             if sight.offset_m is None:
@@ -437,7 +458,11 @@ class Mission:
             wall_distance = float(np.median(wall_estimates)) - here
         if far_estimates:
             self.result.far_distance_m = float(np.median(far_estimates)) - here
-        return waypoint, step.delta_heading[1:], wall_distance
+        # The push starts from where the vehicle was at the last frame, not from the waypoint it was still on
+        # its way to (within the arrival tolerance): its last correction, the wall's and the far surface's
+        # distances were all measured from there (measured, hard world seed 44: started from the waypoint
+        # 0.04 m aside, a push through a polygon 0.26 m clear touched its edge).
+        return tuple(prev_position), step.delta_heading[1:], wall_distance
 
     def _send(self, waypoint) -> None:
         self.link.set_position_target(waypoint, self.yaw)

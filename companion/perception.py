@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.gap import GapDetection
 from companion.motion import derotate, level_pixel
 
 
@@ -21,15 +22,24 @@ class Perception:
 
 
 def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: np.ndarray, flow_backend,
-             detector, derotate_flow: bool = True) -> Perception:
-    """``prev_attitude``/``attitude``: (roll, pitch, yaw) estimates at the two frames' time stamps."""
+             detector, derotate_flow: bool = True, baseline_m: float | None = None,
+             min_baseline_m: float = 0.0) -> Perception:
+    """``prev_attitude``/``attitude``: (roll, pitch, yaw) estimates at the two frames' time stamps.
+    ``baseline_m``: how far the camera moved between them; under ``min_baseline_m`` the pair has no parallax to
+    show and is not looked at (the flow is still returned): the flow of a camera that did not move is noise, and
+    the detector finds "openings" in it."""
     t0 = time.perf_counter()
     flow = flow_backend.estimate(prev_rgb, rgb)
     if derotate_flow:
         flow = derotate(flow, K, prev_attitude, attitude)
     flow_ms = (time.perf_counter() - t0) * 1000
     t0 = time.perf_counter()
-    detection = detector(flow)
+    if baseline_m is not None and baseline_m < min_baseline_m:
+        detection = GapDetection(np.zeros(flow.shape[:2], dtype=bool), None, 0.0, None,
+                                 f"the camera moved {baseline_m:.3f} m between the frames, under the "
+                                 f"{min_baseline_m:.3f} m a parallax needs: not looked at", "baseline")
+    else:
+        detection = detector(flow)
     detect_ms = (time.perf_counter() - t0) * 1000
     # The servo reads image position as position error: measure it in a level camera (see level_pixel).
     level = (level_pixel(detection.centroid, K, attitude[0], attitude[1])

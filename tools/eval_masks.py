@@ -6,9 +6,10 @@ turns it into a gap mask.  Compared with the ground-truth gap mask of frame 1 (t
 passes through the opening) it records IoU, centroid error, detection and time.
 
 Outputs (in ``-o/--out``): ``eval_masks.json`` (``rows`` with scene, viewpoint, backend, detector, iou,
-centroid_err_px, detected, ms, flow_ms, detect_ms; ``summary`` per backend × detector; ``goals``),
-``eval_masks.md`` (Markdown tables) and ``montage.png`` (per scene: frame, flow colour, each detector's mask
-over the ground truth: green = truth only, red = detection only, yellow = both, cross = centroid).
+centroid_err_px, detected, ms, flow_ms, detect_ms, truth_area_px, mask_area_px; ``summary`` per backend ×
+detector; ``goals``), ``eval_masks.md`` (Markdown tables) and ``montage.png`` (per scene: frame, flow colour,
+each detector's mask over the ground truth: green = truth only, red = detection only, yellow = both, cross =
+centroid).
 
 Ground truth comes from ``scenes.groundtruth``: the gap mask is frame 1's label image (pixels showing what
 lies beyond the wall); the ``groundtruth`` backend is its occlusion-checked exact flow.
@@ -301,7 +302,8 @@ def evaluate_scene(scene, views_of, backends: dict, backend_specs, detectors, *,
                 rows.append({"scene": name, "viewpoint": vp.name, "backend": bname, "detector": dname,
                              "iou": iou(det.mask, truth), "centroid_err_px": err, "detected": det.found,
                              "ms": flow_ms + det_ms, "flow_ms": flow_ms, "detect_ms": det_ms,
-                             "truth_area_px": int(truth.sum()), "reason": det.reason})
+                             "truth_area_px": int(truth.sum()), "mask_area_px": int(det.mask.sum()),
+                             "reason": det.reason})
                 if tiles is not None and len(tiles) < 2 + len(detectors):
                     tiles.append(label(overlay(r1.rgb, truth, det), f"{dname} IoU {rows[-1]['iou']:.2f}"))
         if tiles is not None:

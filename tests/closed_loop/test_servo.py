@@ -150,9 +150,12 @@ def test_metric_step_removes_most_of_the_offset_and_holds_off_the_wall_until_the
     assert metric_step((0.05, 0.02), 0.30, 0.85, 0.1, 5, cfg).delta_heading[0] == 0.0   # not that close
     assert metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, sightings=3).push
     assert not metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, sightings=2).push    # placed too few times
-    # held still, a frame pair would show no parallax: step back (the next step comes forward again)
+    # held still, a frame pair would show no parallax: step sideways, left and right in turn (the next step
+    # comes back)
     still = metric_step((0.01, 0.0), 0.30, 0.85, 0.1, 5, cfg)
-    assert still.delta_heading[0] == pytest.approx(-cfg.probe_step_m) and not still.push
+    assert still.delta_heading == pytest.approx((0.0, -cfg.probe_step_m, 0.0)) and not still.push
+    assert metric_step((0.01, 0.0), 0.30, 0.85, 0.1, 6, cfg).delta_heading == pytest.approx(
+        (0.0, cfg.probe_step_m, 0.0))
     # centred but far from a small-looking wall: move on, do not push yet
     approach = metric_step((0.05, 0.02), 0.45, 2.5, 0.05, 5, cfg)
     assert approach.aligned and not approach.push and approach.delta_heading[0] == pytest.approx(
@@ -334,16 +337,17 @@ def test_metric_step_budget_and_forward_step():
     assert seen.delta_heading[0] > cfg.probe_step_m
 
 
-def test_metric_step_steps_back_only_when_it_would_stand_still():
+def test_metric_step_steps_aside_only_when_it_would_stand_still():
     from companion.servo import metric_step
 
     cfg = EXACT
-    # at exactly the probe floor, aligned but unseen: no creep, and standing still it steps back
-    assert metric_step((0.0, 0.0), 0.375, cfg.probe_floor_m, 0.5, 5, cfg).delta_heading[0] == -cfg.probe_step_m
-    # moving on normally: no step back
+    # at exactly the probe floor, aligned but unseen: no creep, and standing still it steps sideways
+    assert metric_step((0.0, 0.0), 0.375, cfg.probe_floor_m, 0.5, 5, cfg).delta_heading == (0.0, -cfg.probe_step_m,
+                                                                                             0.0)
+    # moving on normally: no step aside
     assert metric_step((0.0, 0.0), 0.5, 3.0, 0.0, 0, cfg, clearance_here_m=0.5).delta_heading[0] == \
         cfg.forward_step_m
-    # held off the wall (not aligned, hold distance reached) but moving sideways or down: no step back
+    # held off the wall (not aligned, hold distance reached) but moving sideways or down: no step aside
     assert metric_step((0.0, 0.125), 0.3, 0.0, 0.0, 0, cfg).delta_heading == (0.0, 0.0, 0.125)
     assert metric_step((0.02, 0.0), 0.3, 0.0, 0.0, 0, cfg).delta_heading == (0.0, 0.02, 0.0)
     assert metric_step((0.0, 0.02), 0.3, 0.0, 0.0, 0, cfg).delta_heading == (0.0, 0.0, 0.02)

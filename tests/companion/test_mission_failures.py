@@ -6,6 +6,7 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+import pytest
 
 from companion.camera import Frame
 from companion.link.base import AutopilotLink, LinkError
@@ -207,3 +208,102 @@ def test_rearming_is_bounded_and_a_refused_takeoff_while_armed_is_not_retried(tm
     armed = ScriptedLink(refuse={"takeoff": "command 22 refused with MAV_RESULT_DENIED: Takeoff denied: no home"})
     result = _fly(tmp_path / "armed", armed).result
     assert result.state is State.FAILED and armed.calls.count("arm") == 1 and armed.calls.count("takeoff") == 1
+
+
+class StuckLink(ScriptedLink):
+    """Setpoints are taken (and kept), the vehicle stays where it is."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setpoints: list[tuple] = []
+
+    def set_position_target(self, position, yaw) -> None:
+        self._do("setpoint")
+        self.setpoints.append(tuple(position))
+
+
+class ZeroFlow:
+    def estimate(self, a, b):
+        return np.zeros(a.shape[:2] + (2,), np.float32)
+
+
+def _fly_stuck(folder, detector, **config):
+    link = StuckLink()
+    mission = Mission(link, StillCamera(), ZeroFlow(), detector, RunLog(folder, images=False),
+                      config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3, estimate_wait_s=0.01,
+                                           step_timeout_s=0.01, search_shift_m=0.0, **config))
+    result = mission.run()
+    mission.runlog.close()
+    return result, link
+
+
+class HalfTheFrame:
+    """A detector that sees what noise looked like: a big "opening", the frame's right half."""
+
+    def __init__(self) -> None:
+        self.looked = 0
+
+    def __call__(self, flow):
+        from companion.gap import GapDetection
+
+        self.looked += 1
+        mask = np.zeros(flow.shape[:2], bool)
+        mask[:, 32:] = True
+        return GapDetection(mask, (47.5, 23.5), float(mask.sum()), None, None, "fake", (47.5, 23.5), 16.0)
+
+
+def test_a_frame_pair_taken_without_moving_is_not_looked_at(tmp_path):
+    """MissionConfig.min_baseline_m: a camera that did not move between two frames shows no parallax, and the
+    detector finds "openings" in its flow's noise (measured, hard world seed 43: a pair 0.01 m apart showed a
+    61 % "opening", and the vehicle pushed into the wall).  Such a pair is not looked at: nothing is seen, nothing
+    pushed; with no minimum the same pairs reach the detector, and the mission pushes through its "opening"."""
+    detector = HalfTheFrame()
+    result, _ = _fly_stuck(tmp_path / "still", detector)
+    assert detector.looked == 0 and result.state is State.REFUSED
+    assert result.reason == "no opening found in 8 frames: nothing seen to fly through"
+    unguarded, _ = _fly_stuck(tmp_path / "no_minimum", detector, min_baseline_m=0.0)
+    assert detector.looked >= 3 and unguarded.state is State.DONE and unguarded.push_length_m > 0
+
+
+def test_the_push_starts_where_the_vehicle_was_at_the_last_frame_not_at_its_waypoint(tmp_path):
+    """The push's correction and distances are measured from where the vehicle was at the frame: a vehicle that
+    has not reached its last waypoint (here: never moved) pushes from where it is (measured, hard world seed 44:
+    started from the waypoint 0.04 m aside, a push through a polygon 0.26 m clear touched its edge)."""
+    import math
+
+    from companion.servo import ServoConfig
+
+    result, link = _fly_stuck(tmp_path, HalfTheFrame(), min_baseline_m=0.0)
+    assert result.state is State.DONE
+    n = math.ceil(result.push_length_m / ServoConfig().push_increment_m)
+    last_waypoint, first_push = link.setpoints[-n - 1], link.setpoints[-n]
+    here = (0.0, 0.0, -1.5)
+    assert math.dist(last_waypoint, here) > 0.3                      # the servo's waypoints ran ahead of it
+    assert math.dist(first_push, here) <= ServoConfig().push_increment_m + 2 * ServoConfig().lateral_clamp_far_m
+
+
+def test_a_look_is_bounded_by_the_nearest_wall_any_earlier_look_allows():
+    """companion.mission.search_wall_bound: each look's last sight of the wall (forward, right, measured turn)
+    bounds where the wall's face can be at another look's place: up to search_wall_turn_rad turned, or its
+    measured turn give or take search_yaw_margin_rad; of several looks, the nearest bound counts (measured: a
+    look's sight far across with a turn measured wrong started the next look 0.3 m from the wall)."""
+    import math
+
+    from companion.mission import search_wall_bound
+
+    turn, margin = math.radians(25.0), math.radians(8.0)
+    assert search_wall_bound([], 1.0, turn, margin) is None
+    unturned = [(3.0, 0.0, None)]
+    assert search_wall_bound(unturned, 1.0, turn, margin) == pytest.approx(3.0 - math.tan(turn))
+    assert search_wall_bound(unturned, -1.0, turn, margin) == pytest.approx(3.0 - math.tan(turn))
+    # turned 10° (further away to the right): the measured turn allows more, on that side only
+    turned = [(3.0, 0.0, math.radians(10.0))]
+    assert search_wall_bound(turned, 1.0, turn, margin) == pytest.approx(
+        3.0 + math.tan(math.radians(10.0)) - math.tan(margin))
+    assert search_wall_bound(turned, -1.0, turn, margin) == pytest.approx(
+        3.0 - math.tan(math.radians(10.0)) - math.tan(margin))
+    # a sight 3 m across, its turn measured 20° the wrong way, says 3.7 m; one 0.5 m across says 2.8 m
+    far_wrong = (3.0, -3.0, math.radians(20.0))
+    assert search_wall_bound([far_wrong], 0.0, turn, margin) > 3.5
+    assert search_wall_bound([far_wrong, (3.0, -0.5, None)], 0.0, turn, margin) == pytest.approx(
+        3.0 - 0.5 * math.tan(turn))

@@ -175,3 +175,23 @@ def test_a_search_sets_refused_openings_aside_and_takes_none_beyond_its_reach():
     for _ in range(3):
         seen = reaching.observe([cand(left)], (0.0, 0.0), distance, F, W, H)
     assert seen.detection is None and seen.offset_m is None
+
+
+def test_the_clear_radius_steered_by_holds_for_two_estimates_in_a_row():
+    """One view's estimate, the first or one that jumps (measured, hard world: 0.16 -> 0.38 m on an opening 0.22 m
+    clear, and a first one of 0.83 m on one 0.27 m clear, pushed at once and touched), does not set the radius the
+    vehicle steers and pushes by until a second estimate agrees; frames that place nothing new do not count."""
+    small, large = rect(140, 100, 180, 140), rect(100, 60, 220, 180)     # about 0.3 and 0.7 m clear at 2 m
+    tracker = OpeningTracker()
+    for _ in range(2):
+        tracker.observe([cand(small)], (0.0, 0.0), None, F, W, H)
+    alone = tracker.observe([cand(small)], (0.0, 0.0), 2.0, F, W, H)
+    assert alone.clear_radius_m == 0.0 and alone.offset_m is not None      # steered to, not yet pushed through
+    first = tracker.observe([cand(small)], (0.0, 0.0), 2.0, F, W, H).clear_radius_m
+    assert first == pytest.approx(tracker.clear_radius_m(20.0, 2.0, F), abs=0.05)
+    jumped = tracker.observe([cand(large)], (0.0, 0.0), 2.0, F, W, H).clear_radius_m
+    assert jumped == pytest.approx(first)
+    unseen = tracker.observe([], (0.0, 0.0), 2.0, F, W, H).clear_radius_m
+    assert unseen == pytest.approx(first)
+    agreed = tracker.observe([cand(large)], (0.0, 0.0), 2.0, F, W, H).clear_radius_m
+    assert agreed > first + 0.2

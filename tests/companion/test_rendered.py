@@ -85,6 +85,9 @@ def test_eval_masks_cli_smoke(tmp_path):
     assert "raft" in data["meta"]["skipped_backends"]
     parallax = [r for r in data["rows"] if r["detector"] == "parallax"]
     assert all(r["detected"] and r["iou"] > 0.8 for r in parallax)
+    # the areas bound the IoU: it is at most the smaller over the larger
+    assert all(r["iou"] <= min(r["mask_area_px"], r["truth_area_px"]) / max(r["mask_area_px"], r["truth_area_px"])
+               + 1e-9 for r in parallax)
     assert (tmp_path / "eval_masks.md").read_text().startswith("# Gap masks")
     assert (tmp_path / "montage.png").stat().st_size > 1000
 

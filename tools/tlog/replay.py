@@ -40,6 +40,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     from companion.flow.colour import flow_to_colour
     from companion.flow.registry import make_flow_backend, parse_backend
     from companion.gap import get_detector
+    from companion.mission import MissionConfig
     from companion.opening import OpeningTracker, candidates_in
     from companion.perception import perceive
     from scenes import PinholeCamera, Pose, load_scene, render_splats
@@ -72,8 +73,10 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     rows, prev = [], render(0)
     for step in sorted(s for s in frames if s > 0):
         rgb = render(step)
+        before, now = frames[step - 1].get("position_est"), frames[step].get("position_est")
+        moved = math.dist(before, now) if before is not None and now is not None else None
         p = perceive(prev, rgb, frames[step - 1]["attitude_est"], frames[step]["attitude_est"], camera.K,
-                     backend, detect)
+                     backend, detect, baseline_m=moved, min_baseline_m=MissionConfig().min_baseline_m)
         used = openings.observe(candidates_in(p.detection, camera.K, frames[step]["attitude_est"]), (0.0, 0.0),
                                 None, float(camera.K[0, 0]), camera.width, camera.height).target_px
         flown = decisions.get(step, {}).get("centroid_used")
