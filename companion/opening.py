@@ -257,7 +257,7 @@ class OpeningTracker:
         # or one that jumps (measured, hard world seeds 41, 44 and 45: 0.16 -> 0.38 m, 0.23 -> 0.50 m, 0.29 ->
         # 0.35 m and a first 0.83 m, on openings 0.22-0.27 m clear, each pushed at once and touched), does not
         # decide a push on its own.
-        steady = min(self.radius_trail[-2:] + [radius]) if len(self.radius_trail) >= 2 else 0.0
+        steady = min(self.radius_trail[-2:]) if len(self.radius_trail) >= 2 else 0.0
         offset = (target[0] - viewer[0], target[1] - viewer[1])
         here = None
         if chosen is not None and axis_px is not None and self.world.last_accepted:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.gap import GapDetection
+from companion.gap import _no_gap
 from companion.motion import derotate, level_pixel
 
 
@@ -35,9 +35,8 @@ def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: 
     flow_ms = (time.perf_counter() - t0) * 1000
     t0 = time.perf_counter()
     if baseline_m is not None and baseline_m < min_baseline_m:
-        detection = GapDetection(np.zeros(flow.shape[:2], dtype=bool), None, 0.0, None,
-                                 f"the camera moved {baseline_m:.3f} m between the frames, under the "
-                                 f"{min_baseline_m:.3f} m a parallax needs: not looked at", "baseline")
+        detection = _no_gap(flow.shape[:2], f"the camera moved {baseline_m:.3f} m between the frames, under the "
+                            f"{min_baseline_m:.3f} m a parallax needs: not looked at", "baseline")
     else:
         detection = detector(flow)
     detect_ms = (time.perf_counter() - t0) * 1000
