@@ -149,6 +149,7 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, settings: Inf
               "refine_iters": settings.refine_iters if two_pass else 0,
               "refine_min_scale": settings.refine_min_scale if two_pass else 0.0,
               "refine_max_flow": settings.refine_max_flow if two_pass else 0.0,
+              "patch_levels": settings.patch_levels,
               "variational_levels": settings.variational_levels,
               "variational_iters": settings.variational_iters if settings.variational_levels else 0,
               "precision": precision,
@@ -164,7 +165,8 @@ def inference_overrides(args: argparse.Namespace) -> dict:
     return {"iters": args.val_iters, "input_scale": args.input_scale, "mirror_average": args.mirror_average,
             "refine_scale": args.refine_scale, "refine_iters": args.refine_iters,
             "refine_min_scale": args.refine_min_scale, "refine_max_flow": args.refine_max_flow,
-            "variational_levels": args.variational_levels, "variational_iters": args.variational_iters,
+            "patch_levels": args.patch_levels, "variational_levels": args.variational_levels,
+            "variational_iters": args.variational_iters,
             "precision": args.eval_precision}
 
 
@@ -614,6 +616,9 @@ def build_parser() -> argparse.ArgumentParser:
                                       "--refine-scale)")
     v.add_argument("--refine-iters", dest="refine_iters", type=int, default=None, metavar="N",
                    help="RAFT iterations of the refinement pass")
+    v.add_argument("--patch-levels", dest="patch_levels", type=int, default=None, metavar="N",
+                   help="then refine the flow by DIS's patch search on N scales, the coarsest at 1/2**(N-1) of "
+                        "the frame (raft patch_levels; 0: none)")
     v.add_argument("--variational-levels", dest="variational_levels", type=int, default=None, metavar="N",
                    help="then refine the flow variationally on N scales, coarse to fine (raft "
                         "variational_levels; 0: RAFT's flow as it is)")
@@ -680,6 +685,8 @@ def _check(args: argparse.Namespace) -> None:
     if args.refine_iters is not None and args.refine_iters < 1:
         raise CliError(f"--refine-iters must be at least 1 (got {args.refine_iters}); use --refine-scale 0 "
                        "for one pass")
+    if args.patch_levels is not None and not 0 <= args.patch_levels <= 4:
+        raise CliError(f"--patch-levels must be 0 (off) to 4 (got {args.patch_levels})")
     if args.variational_levels is not None and not 0 <= args.variational_levels <= 4:
         raise CliError(f"--variational-levels must be 0 (off) to 4 (got {args.variational_levels})")
     if args.variational_iters is not None and args.variational_iters < 1:

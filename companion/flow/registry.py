@@ -57,7 +57,8 @@ def parse_backend(spec: str) -> tuple[str, dict]:
     'raft:scale=1.5', 'raft:small,iters=20,mirror=1', 'raft:refine=0' -> RAFT options (``scale`` is the
     backend's ``input_scale``, ``mirror`` its ``mirror_average``, 0 or 1, ``refine`` its ``refine_scale``,
     0 for one pass, ``refine_iters`` its ``refine_iters``, ``refine_min`` its ``refine_min_scale``,
-    ``refine_flow`` its ``refine_max_flow``, 0 for a fixed refinement scale, ``vr`` its ``variational_levels``,
+    ``refine_flow`` its ``refine_max_flow``, 0 for a fixed refinement scale, ``patch`` its ``patch_levels``, 0
+    for none, ``vr`` its ``variational_levels``,
     0 for none, ``vr_iters`` its ``variational_iters``, ``precision`` auto, bf16 or fp32).
     Options not given are the weights file's own.
     """
@@ -90,11 +91,12 @@ _RAFT_KEYS = {"scale": ("input_scale", float, "a number"), "iters": ("iters", in
               "refine_iters": ("refine_iters", int, "a number"),
               "refine_min": ("refine_min_scale", float, "a number"),
               "refine_flow": ("refine_max_flow", float, "a number of pixels (0: a fixed refinement scale)"),
+              "patch": ("patch_levels", int, "a number of scales (0: no DIS patch refinement)"),
               "vr": ("variational_levels", int, "a number of scales (0: no variational refinement)"),
               "vr_iters": ("variational_iters", int, "a number"),
               "precision": ("precision", _precision, "auto, bf16 or fp32")}
 _RAFT_USAGE = ("scale=<s>,iters=<n>,mirror=<0|1>,refine=<s|0>,refine_iters=<n>,refine_min=<s>,refine_flow=<px|0>,"
-               "vr=<levels|0>,vr_iters=<n>,precision=<auto|bf16|fp32>")
+               "patch=<levels|0>,vr=<levels|0>,vr_iters=<n>,precision=<auto|bf16|fp32>")
 
 
 def _raft_options(spec: str, arg: str) -> dict:

@@ -20,6 +20,7 @@ from companion.gap import (
     GapDetection,
     GapDetectorConfig,
     ParallaxGapConfig,
+    _blend_level,
     _from_contour,
     _otsu_split,
     clear_circle,
@@ -663,14 +664,20 @@ def test_parallax_detector_ignores_the_untrusted_border():
 
 def test_parallax_detector_untrusted_border_of_one_pixel():
     # a 1 px frame of very far flow (ρ = 0.01) round a wall with a gap (ρ 0.5 and 0.25): with border_px = 1 it is
-    # ignored and the gap found; read, the frame would be the sharpest depth step, and no opening
+    # ignored and the gap found; read, the frame is the sharpest depth step but no hole in anything: no opening,
+    # unless every step is tried with the edge at the blend's midpoint (the frame's far side then takes in the
+    # gap, a quarter of the wall's ρ), when the gap is found after it
     far = box(30, 20, 50, 40)
     frame = ~box(1, 1, W - 1, H - 1)
     flow = lateral_flow(far)
     flow[frame] = lateral_flow(frame, rho_far=0.01)[frame]
     res = detect_gap_parallax(flow, ParallaxGapConfig(border_px=1), motion=LATERAL)
     assert res.found and iou(res.mask, far) > 0.9
+    img = np.where(frame, 0, np.where(far, 120, 200)).astype(np.uint8)
+    assert far_region(img, np.log(50.0) / 200, far_config())[0][0, 0]        # the frame's step is the sharpest
     assert not detect_gap_parallax(flow, ParallaxGapConfig(border_px=0), motion=LATERAL).found
+    res = detect_gap_parallax(flow, ParallaxGapConfig(border_px=0, every_step=True, edge_blend=0.5), motion=LATERAL)
+    assert res.found and iou(res.mask, far) > 0.9
 
 
 def test_parallax_detector_contrast_is_read_on_the_true_log_scale():
@@ -871,3 +878,45 @@ def test_parallax_detector_refuses_an_even_median_kernel():
     # median smoothing needs an odd kernel: 2 is an error, not silently no smoothing
     with pytest.raises(cv2.error):
         detect_gap_parallax(lateral_flow(box(30, 20, 50, 40)), ParallaxGapConfig(median_ksize=2), motion=LATERAL)
+
+
+def blurred_lateral_flow(far: np.ndarray, rho_near: float, rho_far: float, sigma: float) -> np.ndarray:
+    """:func:`lateral_flow` as a flow estimator returns it: each surface's flow blended across the edge."""
+    weight = cv2.GaussianBlur(far.astype(np.float64), (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
+    flow = np.zeros(far.shape + (2,), np.float32)
+    flow[..., 0] = -(weight * rho_far + (1 - weight) * rho_near) * F
+    return flow
+
+
+def test_parallax_detector_puts_a_blurred_edge_at_the_blend_midpoint():
+    # an opening at a quarter of the wall's inverse depth, its edge blurred over a few pixels as estimated flow is:
+    # split on log ρ (Otsu's), the edge lands where ρ is nearer the far side and the mask shrinks by about a pixel
+    # per edge; split at the linear midpoint (edge_blend 0.5) it lands on the true edge
+    far = box(20, 15, 60, 45)
+    flow = blurred_lateral_flow(far, rho_near=0.8, rho_far=0.2, sigma=1.5)
+    cfg = dict(RAW, area_min_frac=0.001)
+    at_midpoint = detect_gap_parallax(flow, ParallaxGapConfig(edge_blend=0.5, **cfg), motion=LATERAL)
+    on_log = detect_gap_parallax(flow, ParallaxGapConfig(edge_blend=None, **cfg), motion=LATERAL)
+    assert abs(at_midpoint.mask.sum() - far.sum()) <= 0.02 * far.sum()
+    assert on_log.mask.sum() < 0.95 * far.sum()
+    assert iou(at_midpoint.mask, far) > iou(on_log.mask, far) + 0.03
+
+
+def test_blend_level_is_the_linear_midpoint_on_the_log_scale():
+    step = np.log(4.0) / 200                      # 200 levels span a factor of 4 in ρ
+    assert _blend_level(0, 200, step, 0.5) == pytest.approx(np.log(2.5) / step)
+    assert _blend_level(0, 200, step, 0.0) == pytest.approx(0.0, abs=1e-9)
+    assert _blend_level(0, 200, step, 1.0) == pytest.approx(200.0)
+
+
+def test_every_step_looks_beyond_the_next_step_when_the_sharpest_hides_no_hole():
+    # a floor across the bottom, four times the wall's inverse depth, and a gap at 0.6 of it: the floor's step is
+    # the sharpest, and beyond it lie the wall and the gap, which span the frame and are no hole in anything
+    floor, gap = box(0, H - 12, W, H), box(30, 15, 50, 35)
+    rho = np.where(floor, 2.0, np.where(gap, 0.3, 0.5))
+    flow = np.zeros((H, W, 2), np.float32)
+    flow[..., 0] = -rho * F
+    cfg = dict(RAW, area_min_frac=0.001, border_min_frac=0.0)
+    assert not detect_gap_parallax(flow, ParallaxGapConfig(**cfg), motion=LATERAL).found
+    res = detect_gap_parallax(flow, ParallaxGapConfig(every_step=True, **cfg), motion=LATERAL)
+    assert res.found and iou(res.mask, gap) > 0.9

@@ -43,7 +43,7 @@ def test_model_card_epe_is_reproduced(tmp_path):
     result = json.loads((tmp_path / "eval.json").read_text())
     assert result["pairs"] == val["pairs"] and result["valid_pixels"] == val["valid_pixels"]
     for key in ("iters", "input_scale", "mirror_average", "refine_scale", "refine_iters", "refine_min_scale",
-                "refine_max_flow"):
+                "refine_max_flow", "patch_levels", "variational_levels"):
         assert result[key] == val[key], key
     if result["precision"] == val.get("precision", "fp32"):   # bf16 weights on a CPU without it run fp32
         assert result["epe"] == pytest.approx(val["epe"], rel=2e-3)

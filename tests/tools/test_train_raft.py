@@ -495,7 +495,7 @@ def test_export_writes_the_weights_with_the_inference_settings_given(tmp_path, c
         tmp_path / "raft-small-refined-flowgap.pth")
     assert after.variant == before.variant == "small-refined"
     assert after.inference.iters == 2 and after.inference.variational_levels == 1
-    assert before.inference.iters == 3 and before.inference.variational_levels == 2     # the model card's
+    assert before.inference.iters == 3 and before.inference.patch_levels == 3     # the model card's
     assert after.inference.variational_iters == before.inference.variational_iters     # kept
     assert before.state_dict.keys() == after.state_dict.keys()
     assert all(torch.equal(before.state_dict[k], after.state_dict[k]) for k in before.state_dict)

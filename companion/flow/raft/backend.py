@@ -24,7 +24,7 @@ from companion.flow.raft.settings import (
     refinement_is_adaptive,
     resolve_precision,
 )
-from companion.flow.raft.variational import variational_refine
+from companion.flow.raft.variational import patch_refine, variational_refine
 from companion.flow.raft.weights import EXPECTED, load_raft_state_dict
 
 __all__ = ["DEFAULT_WEIGHTS", "INPUT_SCALE_RANGE", "PRECISIONS", "RAFT_DEFAULTS", "InferenceSettings", "RaftBackend",
@@ -99,14 +99,16 @@ class RaftBackend:
                  input_scale: float | None = None, mirror_average: bool | None = None,
                  refine_scale: float | None = None, refine_iters: int | None = None,
                  refine_min_scale: float | None = None, refine_max_flow: float | None = None,
-                 variational_levels: int | None = None, variational_iters: int | None = None,
+                 patch_levels: int | None = None, variational_levels: int | None = None,
+                 variational_iters: int | None = None,
                  precision: str | None = None) -> None:
         if num_threads is not None:
             torch.set_num_threads(int(num_threads))
         overrides = {"iters": iters, "input_scale": input_scale, "mirror_average": mirror_average,
                      "refine_scale": refine_scale, "refine_iters": refine_iters,
                      "refine_min_scale": refine_min_scale, "refine_max_flow": refine_max_flow,
-                     "variational_levels": variational_levels, "variational_iters": variational_iters,
+                     "patch_levels": patch_levels, "variational_levels": variational_levels,
+                     "variational_iters": variational_iters,
                      "precision": precision}
         RAFT_DEFAULTS.replace(**overrides)           # bad values fail before any file is read
         self.warm_start = bool(warm_start)
@@ -162,6 +164,7 @@ class RaftBackend:
     refine_iters = property(lambda self: self.settings.refine_iters)
     refine_min_scale = property(lambda self: self.settings.refine_min_scale)
     refine_max_flow = property(lambda self: self.settings.refine_max_flow)
+    patch_levels = property(lambda self: self.settings.patch_levels)
     variational_levels = property(lambda self: self.settings.variational_levels)
 
     @property
@@ -225,8 +228,9 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, settings: Inf
 
     With a refinement scale, the first pass's flow starts a second pass of ``refine_iters`` iterations on the
     frames enlarged by :func:`refinement_scale`, whose flow is returned (the 1/8-resolution flow returned
-    stays the first pass's, on the grid that ``previous_low`` is matched against).  With
-    ``variational_levels``, the flow is then refined variationally (:func:`.variational.variational_refine`).
+    stays the first pass's, on the grid that ``previous_low`` is matched against).  With ``patch_levels``,
+    the flow is then refined by DIS's patch search (:func:`.variational.patch_refine`), and with
+    ``variational_levels`` variationally (:func:`.variational.variational_refine`).
     ``known_features``: the first frame's (features, quarter-resolution features or None), already known (one
     pass on the frames as they are only); ``features_out``: a dict that receives the second frame's as
     ``"fmap2"`` and ``"fquarter2"``.
@@ -241,6 +245,8 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, settings: Inf
             scale = refinement_scale(flow, settings.refine_scale, settings.refine_min_scale, settings.refine_max_flow)
             flow, _ = _one_pass(model, img1, img2, settings.refine_iters, scale, flow, None, padding_mode, device,
                                 settings.mirror_average)
+    if settings.patch_levels:
+        flow = patch_refine(img1, img2, flow, settings.patch_levels)
     if settings.variational_levels:
         flow = variational_refine(img1, img2, flow, settings.variational_levels, settings.variational_iters)
     return flow, low

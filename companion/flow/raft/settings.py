@@ -26,7 +26,9 @@ class InferenceSettings:
     the first pass, a second pass of ``refine_iters`` iterations on frames enlarged by up to this factor,
     started from the first pass's flow (0: one pass), at the scale :func:`refinement_scale` picks between
     ``refine_min_scale`` and ``refine_scale`` so that the enlarged motion stays within ``refine_max_flow``
-    pixels (0, or ``refine_min_scale`` ≥ ``refine_scale``: always ``refine_scale``); ``variational_levels``: then
+    pixels (0, or ``refine_min_scale`` ≥ ``refine_scale``: always ``refine_scale``); ``patch_levels``: then the
+    flow refined by DIS's patch search (:func:`.variational.patch_refine`) on this many scales, the coarsest at
+    1/2**(patch_levels-1) of the frame (0: none); ``variational_levels``: then
     the flow refined by the images' own gradients (:mod:`.variational`) on this many scales, coarse to fine,
     with ``variational_iters`` fixed-point iterations each (0: RAFT's flow as it is); ``precision``: "bf16"
     (the network under bf16 autocast; correlation, upsampling and the flow itself stay float32), "fp32", or
@@ -43,6 +45,7 @@ class InferenceSettings:
     refine_iters: int = 4
     refine_min_scale: float = 2.0
     refine_max_flow: float = 0.0
+    patch_levels: int = 0
     variational_levels: int = 0
     variational_iters: int = 10
     precision: str = "fp32"
@@ -64,6 +67,8 @@ class InferenceSettings:
         if not (np.isfinite(self.refine_max_flow) and self.refine_max_flow >= 0):
             raise ValueError(f"refine_max_flow must be 0 (a fixed refine_scale) or a positive number of pixels "
                              f"(got {self.refine_max_flow})")
+        if not 0 <= self.patch_levels <= 4:
+            raise ValueError(f"patch_levels must be 0 (off) to 4 (got {self.patch_levels})")
         if not 0 <= self.variational_levels <= 4:
             raise ValueError(f"variational_levels must be 0 (off) to 4 (got {self.variational_levels})")
         if self.variational_iters < 1:
@@ -75,7 +80,7 @@ class InferenceSettings:
     def replace(self, **changes) -> InferenceSettings:
         """A validated copy with the changes that are not None (None: keep this setting)."""
         kept = {k: v for k, v in changes.items() if v is not None}
-        for key in ("iters", "refine_iters", "variational_levels", "variational_iters"):
+        for key in ("iters", "refine_iters", "patch_levels", "variational_levels", "variational_iters"):
             if key in kept:
                 kept[key] = int(kept[key])
         for key in ("input_scale", "refine_scale", "refine_min_scale", "refine_max_flow"):
@@ -157,6 +162,8 @@ def describe_settings(settings: InferenceSettings) -> str:
         text += " (one pass)"
     if settings.mirror_average:
         text += ", mirror-averaged"
+    if settings.patch_levels:
+        text += f", DIS patch refinement on {settings.patch_levels} scale" + ("s" if settings.patch_levels > 1 else "")
     if settings.variational_levels:
         text += f", variational refinement on {settings.variational_levels} scale" + \
             ("s" if settings.variational_levels > 1 else "")
