@@ -18,6 +18,18 @@ DIS_PRESETS = {
 _PRESET_OVERRIDES = {"fine": {"finest_scale": 0}}
 
 
+def create_dis(preset: str, settings: tuple[tuple[int | None, str], ...] = ()) -> cv2.DISOpticalFlow:
+    """A fresh OpenCV DIS object for one of :data:`DIS_PRESETS`: OpenCV's preset, flowgap's overrides of it
+    ("fine": finest scale 0), then ``settings``' (value, setter name) pairs whose value is not None."""
+    dis = cv2.DISOpticalFlow_create(DIS_PRESETS[preset])
+    finest = _PRESET_OVERRIDES.get(preset, {}).get("finest_scale")
+    for value, setter in ((finest, "setFinestScale"), *settings):
+        if value is not None:
+            getattr(dis, setter)(int(value))
+    dis.setUseSpatialPropagation(True)
+    return dis
+
+
 def _grey(img: np.ndarray) -> np.ndarray:
     # Frames are RGB (flowgap convention); say so to OpenCV rather than relying on BGR defaults.
     return cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
@@ -46,8 +58,6 @@ class DisBackend:
             raise ValueError(f"unknown DIS preset {preset!r}; choose from {sorted(DIS_PRESETS)}")
         self.preset = preset
         self.warm_start = warm_start
-        if finest_scale is None:
-            finest_scale = _PRESET_OVERRIDES.get(preset, {}).get("finest_scale")
         self._settings = ((finest_scale, "setFinestScale"), (patch_size, "setPatchSize"),
                           (patch_stride, "setPatchStride"),
                           (gradient_descent_iterations, "setGradientDescentIterations"),
@@ -57,12 +67,7 @@ class DisBackend:
         self._previous: np.ndarray | None = None
 
     def _make_dis(self):
-        dis = cv2.DISOpticalFlow_create(DIS_PRESETS[self.preset])
-        for value, setter in self._settings:
-            if value is not None:
-                getattr(dis, setter)(int(value))
-        dis.setUseSpatialPropagation(True)
-        return dis
+        return create_dis(self.preset, self._settings)
 
     def estimate(self, img1: np.ndarray, img2: np.ndarray, flow_init: np.ndarray | None = None) -> np.ndarray:
         h, w = check_pair(img1, img2)

@@ -702,7 +702,7 @@ def test_patch_refinement_pulls_a_coarse_flow_onto_the_true_motion_and_needs_it_
     truth = np.array([18.0, -9.0], np.float32)
     coarse = np.broadcast_to(truth + np.float32([0.8, -0.6]), img1.shape[:2] + (2,)).copy()  # 1 px off
     refined = patch_refine(img1, img2, coarse, levels=2)
-    assert np.abs(coarse).sum() > 0 and not np.shares_memory(refined, coarse)
+    assert not np.shares_memory(refined, coarse)
     error = np.linalg.norm(refined[inner] - truth, axis=-1)
     assert np.median(error) < 0.1, np.median(error)       # from 1 px off to within a tenth of a pixel
     # on the full frame alone a patch search steps a few pixels: started from zero it stays short of 20 px

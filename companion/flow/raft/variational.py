@@ -13,6 +13,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from companion.flow.opencv_flow import create_dis
+
 # OpenCV's defaults for the energy's weights (smoothness alpha, colour constancy delta, gradient constancy
 # gamma); measured on held-out pairs, other weights did no better (see the model card).
 ALPHA = 20.0
@@ -68,13 +70,10 @@ def variational_refine(img1: np.ndarray, img2: np.ndarray, flow: np.ndarray, lev
     return out
 
 
-# DIS's patch size and stride at OpenCV's MEDIUM preset, the one flowgap's "dis:fine" runs down to full resolution
-_PATCH_PRESET = cv2.DISOPTICAL_FLOW_PRESET_MEDIUM
-
-
 def patch_refine(img1: np.ndarray, img2: np.ndarray, flow: np.ndarray, levels: int = 3) -> np.ndarray:
-    """``flow`` (H×W×2 float32, from ``img1`` to ``img2``) refined by DIS's inverse search on ``levels`` scales,
-    from 1/2**(levels-1) of the frame down to the full frame, each ending with DIS's own variational step.
+    """``flow`` (H×W×2 float32, from ``img1`` to ``img2``) refined by DIS's inverse search (``dis:fine``'s DIS:
+    MEDIUM's 8×8 patches) on ``levels`` scales, from 1/2**(levels-1) of the frame down to the full frame, each
+    ending with DIS's own variational step.
 
     RAFT's 1/8-resolution flow finds the large motions and which surface a pixel belongs to; DIS's 8×8 patches,
     started from it, match each pixel's neighbourhood at full resolution, which is what small far-away motions
@@ -85,8 +84,6 @@ def patch_refine(img1: np.ndarray, img2: np.ndarray, flow: np.ndarray, levels: i
     out = np.array(flow, dtype=np.float32, copy=True)
     if levels == 0:
         return out
-    dis = cv2.DISOpticalFlow_create(_PATCH_PRESET)
-    dis.setFinestScale(0)
-    dis.setCoarsestScale(int(levels) - 1)
+    dis = create_dis("fine", ((int(levels) - 1, "setCoarsestScale"),))     # dis:fine's DIS, from a nearer scale
     # a flow of the frame's size and type passed in is DIS's starting point at its coarsest scale
     return dis.calc(_grey(img1), _grey(img2), out)
