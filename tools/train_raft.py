@@ -152,6 +152,7 @@ def evaluate(model: torch.nn.Module, dataset: RenderedFlowDataset, settings: Inf
               "patch_levels": settings.patch_levels,
               "variational_levels": settings.variational_levels,
               "variational_iters": settings.variational_iters if settings.variational_levels else 0,
+              "quarter_refine": settings.quarter_refine,
               "precision": precision,
               "epe": raft_sum / count if count else float("nan")}
     for preset, (_, total) in dis.items():
@@ -166,7 +167,7 @@ def inference_overrides(args: argparse.Namespace) -> dict:
             "refine_scale": args.refine_scale, "refine_iters": args.refine_iters,
             "refine_min_scale": args.refine_min_scale, "refine_max_flow": args.refine_max_flow,
             "patch_levels": args.patch_levels, "variational_levels": args.variational_levels,
-            "variational_iters": args.variational_iters,
+            "variational_iters": args.variational_iters, "quarter_refine": args.quarter_refine,
             "precision": args.eval_precision}
 
 
@@ -625,6 +626,9 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--variational-iters", dest="variational_iters", type=int, default=None, metavar="N",
                    help="fixed-point iterations of the variational refinement on each scale (raft "
                         "variational_iters)")
+    v.add_argument("--quarter-refine", dest="quarter_refine", action=argparse.BooleanOptionalAction, default=None,
+                   help="run RAFT-small-refined's quarter-resolution refinement head (raft quarter_refine; "
+                        "--no-quarter-refine skips it, as when --patch-levels refines the flow anyway)")
     v.add_argument("--eval-precision", dest="eval_precision", choices=PRECISIONS, default=None,
                    help="the network's precision when validating, as the raft backend's precision (auto: bf16 "
                         "on a CPU with AVX512-BF16 or AMX, else fp32; default: the weights' own with "

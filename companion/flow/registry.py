@@ -59,7 +59,8 @@ def parse_backend(spec: str) -> tuple[str, dict]:
     0 for one pass, ``refine_iters`` its ``refine_iters``, ``refine_min`` its ``refine_min_scale``,
     ``refine_flow`` its ``refine_max_flow``, 0 for a fixed refinement scale, ``patch`` its ``patch_levels``, 0
     for none, ``vr`` its ``variational_levels``,
-    0 for none, ``vr_iters`` its ``variational_iters``, ``precision`` auto, bf16 or fp32).
+    0 for none, ``vr_iters`` its ``variational_iters``, ``quarter`` its ``quarter_refine``, 0 or 1, ``precision``
+    auto, bf16 or fp32).
     Options not given are the weights file's own.
     """
     name, _, arg = spec.partition(":")
@@ -94,9 +95,10 @@ _RAFT_KEYS = {"scale": ("input_scale", float, "a number"), "iters": ("iters", in
               "patch": ("patch_levels", int, "a number of scales (0: no DIS patch refinement)"),
               "vr": ("variational_levels", int, "a number of scales (0: no variational refinement)"),
               "vr_iters": ("variational_iters", int, "a number"),
+              "quarter": ("quarter_refine", _zero_or_one, "0 or 1"),
               "precision": ("precision", _precision, "auto, bf16 or fp32")}
 _RAFT_USAGE = ("scale=<s>,iters=<n>,mirror=<0|1>,refine=<s|0>,refine_iters=<n>,refine_min=<s>,refine_flow=<px|0>,"
-               "patch=<levels|0>,vr=<levels|0>,vr_iters=<n>,precision=<auto|bf16|fp32>")
+               "patch=<levels|0>,vr=<levels|0>,vr_iters=<n>,quarter=<0|1>,precision=<auto|bf16|fp32>")
 
 
 def _raft_options(spec: str, arg: str) -> dict:

@@ -42,17 +42,23 @@ def _desat_gain(vec, u, lo: float = 0.0, hi: float = 1.0) -> float:
 
 
 def _desaturate(u: list[float], vec, reduce_only: bool = False) -> None:
-    """Shift ``u`` along ``vec`` in place (twice, the second time by half, as PX4 does)."""
+    """Shift ``u`` along ``vec`` in place (twice, the second time by half, as PX4's ``desaturateActuators``).
+
+    ``reduce_only`` refuses a first shift that would raise ``u`` along ``vec`` (airmode disabled: thrust is
+    never added to unsaturate). The second, half shift always runs, as in PX4: when motors are saturated at
+    both ends, the first shift (``k_min + k_max``) overshoots and the half shift back centres the excess
+    between the bounds, so the net change is half the first shift (still a reduction, never an increase).
+    Skipping it would take the whole first shift off the thrust: with a large roll+pitch demand that is all
+    of it, and the roll/pitch desaturation that follows then zeroes every motor (no thrust, no torque).
+    """
     k = _desat_gain(vec, u)
     if reduce_only and k > 0.0:
         return
     for i in range(4):
         u[i] += k * vec[i]
-    k = _desat_gain(vec, u)
-    if reduce_only and k > 0.0:
-        return
+    k = 0.5 * _desat_gain(vec, u)
     for i in range(4):
-        u[i] += 0.5 * k * vec[i]
+        u[i] += k * vec[i]
 
 
 class Mixer:

@@ -665,8 +665,8 @@ def test_parallax_detector_ignores_the_untrusted_border():
 def test_parallax_detector_untrusted_border_of_one_pixel():
     # a 1 px frame of very far flow (ρ = 0.01) round a wall with a gap (ρ 0.5 and 0.25): with border_px = 1 it is
     # ignored and the gap found; read, the frame is the sharpest depth step but no hole in anything: no opening,
-    # unless every step is tried with the edge at the blend's midpoint (the frame's far side then takes in the
-    # gap, a quarter of the wall's ρ), when the gap is found after it
+    # unless every step is tried with the edge at the blend's midpoint, unbounded (the frame's far side then takes
+    # in the gap, a quarter of the wall's ρ), when the gap is found after it
     far = box(30, 20, 50, 40)
     frame = ~box(1, 1, W - 1, H - 1)
     flow = lateral_flow(far)
@@ -676,7 +676,8 @@ def test_parallax_detector_untrusted_border_of_one_pixel():
     img = np.where(frame, 0, np.where(far, 120, 200)).astype(np.uint8)
     assert far_region(img, np.log(50.0) / 200, far_config())[0][0, 0]        # the frame's step is the sharpest
     assert not detect_gap_parallax(flow, ParallaxGapConfig(border_px=0), motion=LATERAL).found
-    res = detect_gap_parallax(flow, ParallaxGapConfig(border_px=0, every_step=True, edge_blend=0.5), motion=LATERAL)
+    res = detect_gap_parallax(flow, ParallaxGapConfig(border_px=0, every_step=True, edge_blend=0.5,
+                                                    edge_blend_reach_px=None), motion=LATERAL)
     assert res.found and iou(res.mask, far) > 0.9
 
 
@@ -900,6 +901,25 @@ def test_parallax_detector_puts_a_blurred_edge_at_the_blend_midpoint():
     assert abs(at_midpoint.mask.sum() - far.sum()) <= 0.02 * far.sum()
     assert on_log.mask.sum() < 0.95 * far.sum()
     assert iou(at_midpoint.mask, far) > iou(on_log.mask, far) + 0.03
+
+
+def test_the_blended_edge_moves_at_most_its_reach_from_otsus():
+    """ParallaxGapConfig.edge_blend_reach_px: beside the opening a surface whose inverse depth lies between Otsu's
+    split and the blend level (a background close behind the wall, seen past the opening's edge) is not the
+    opening; an unbounded blend takes all of it, the default reach of 1 px one column of it."""
+    hole, shelf = box(20, 15, 50, 45), box(50, 15, 60, 45)
+    rho = np.where(hole, 0.2, np.where(shelf, 0.45, 0.8))
+    flow = np.zeros((H, W, 2), np.float32)
+    flow[..., 0] = -rho * F
+    cfg = dict(RAW, area_min_frac=0.001)
+    otsu = detect_gap_parallax(flow, ParallaxGapConfig(edge_blend=None, **cfg), motion=LATERAL)
+    unbounded = detect_gap_parallax(flow, ParallaxGapConfig(edge_blend=0.5, edge_blend_reach_px=None, **cfg),
+                                    motion=LATERAL)
+    default = detect_gap_parallax(flow, ParallaxGapConfig(edge_blend=0.5, **cfg), motion=LATERAL)
+    assert ParallaxGapConfig().edge_blend_reach_px == 1
+    assert np.array_equal(otsu.mask, hole)
+    assert np.array_equal(unbounded.mask, hole | shelf)
+    assert np.array_equal(default.mask, hole | box(50, 15, 51, 45))
 
 
 def test_blend_level_is_the_linear_midpoint_on_the_log_scale():

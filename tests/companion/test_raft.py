@@ -653,6 +653,37 @@ def test_small_refined_starts_as_the_convex_model_it_grows_from_and_is_recognise
     assert load_raft_state_dict(tmp_path / "r.pth").variant == "small-refined"
 
 
+def test_small_refined_can_skip_its_quarter_head_and_then_flows_as_its_convex_iterations_do():
+    """InferenceSettings.quarter_refine False (spec ``quarter=0``): RAFT-small-refined's quarter-resolution head
+    and the quarter-resolution features it reads are not computed; the flow is the iterations' convex-upsampled
+    one, and a sequence still reuses each frame's features."""
+    a, b = textured_pair(96, 128, (1.5, 0.5))
+    c = np.roll(b, (1, 2), axis=(0, 1))
+    skip = make_flow_backend("raft", random_init_seed=0, iters=2, variant="small-refined", quarter_refine=False)
+    full = make_flow_backend("raft", random_init_seed=0, iters=2, variant="small-refined")
+    with torch.no_grad():                # a head that corrects something, so that skipping it shows
+        weight = full.model.refiner.flow.weight
+        weight.copy_(0.01 * torch.randn(weight.shape, generator=torch.Generator().manual_seed(3)))
+
+    def untouched(*_args, **_kw):
+        raise AssertionError("the quarter-resolution head ran")
+
+    skip.model.refiner.forward = untouched
+    img1, img2 = (torch.from_numpy(x).permute(2, 0, 1)[None].float() for x in (a, b))
+    with torch.inference_mode():
+        convex = full.model(img1, img2, iters=2, quarter_refine=False)
+    assert convex.fquarter2 is None
+    np.testing.assert_allclose(skip.estimate(a, b), convex.flow_up[0].permute(1, 2, 0).numpy(), atol=1e-3)
+    assert np.abs(full.estimate(a, b) - skip.estimate(a, b)).max() > 1e-3
+    fresh = make_flow_backend("raft", random_init_seed=0, iters=2, variant="small-refined", quarter_refine=False)
+    fresh.model.refiner.forward = untouched
+    np.testing.assert_allclose(skip.estimate(b, c), fresh.estimate(b, c), atol=1e-3)   # b's features reused
+    assert "no quarter-resolution head" in skip.describe() and "quarter" not in full.describe()
+    assert parse_backend("raft:quarter=0,patch=3")[1] == {"quarter_refine": False, "patch_levels": 3}
+    with pytest.raises(ValueError, match="quarter"):
+        parse_backend("raft:quarter=yes")
+
+
 def test_local_correlation_is_the_dot_product_over_the_window():
     from companion.flow.raft.refine import local_correlation, warp
 

@@ -182,9 +182,11 @@ def test_desaturate_shifts_once_then_by_half_of_what_is_left():
     w = [1.2, 0.5, 0.5, 0.5]
     _desaturate(w, ones, reduce_only=True)
     assert w == pytest.approx([1.0, 0.3, 0.3, 0.3])
+    # saturated at both ends: −0.1 taken, then half of what is left (+0.05) as PX4 does, whatever its sign; the
+    # net shift (−0.05) centres the excess and is still a reduction
     x = [1.2, -0.1, 0.5, 0.5]
-    _desaturate(x, ones, reduce_only=True)            # −0.1 taken, then +0.1 refused
-    assert x == pytest.approx([1.1, -0.2, 0.4, 0.4])
+    _desaturate(x, ones, reduce_only=True)
+    assert x == pytest.approx([1.15, -0.15, 0.45, 0.45])
 
 
 # ---------------------------------------------------------------- position control: validity, tilt, thrust

@@ -489,13 +489,14 @@ def test_unrecognised_weights_file_is_a_one_line_error(tmp_path, capsys):
 def test_export_writes_the_weights_with_the_inference_settings_given(tmp_path, capsys):
     """--export: the same tensors, with the command line's inference settings over the weights' own."""
     shipped = Path(__file__).resolve().parents[2] / "companion/flow/weights/raft-small-refined-flowgap.pth"
-    assert train_raft.main(["--export", str(shipped), "--val-iters", "2", "--variational-levels", "1",
-                            "-o", str(tmp_path)]) == 0
+    assert train_raft.main(["--export", str(shipped), "--val-iters", "3", "--variational-levels", "1",
+                            "--quarter-refine", "-o", str(tmp_path)]) == 0
     before, after = train_raft.read_weights(shipped), train_raft.read_weights(
         tmp_path / "raft-small-refined-flowgap.pth")
     assert after.variant == before.variant == "small-refined"
-    assert after.inference.iters == 2 and after.inference.variational_levels == 1
-    assert before.inference.iters == 3 and before.inference.patch_levels == 3     # the model card's
+    assert after.inference.iters == 3 and after.inference.variational_levels == 1 and after.inference.quarter_refine
+    assert before.inference.iters == 2 and before.inference.patch_levels == 3     # the model card's
+    assert not before.inference.quarter_refine
     assert after.inference.variational_iters == before.inference.variational_iters     # kept
     assert before.state_dict.keys() == after.state_dict.keys()
     assert all(torch.equal(before.state_dict[k], after.state_dict[k]) for k in before.state_dict)

@@ -85,8 +85,8 @@ class RaftBackend:
     forward), ``device`` ("cpu", "cuda", ...), ``num_threads`` (torch intra-op threads on CPU; None leaves the
     setting alone), ``random_init_seed`` (build seeded random weights instead of loading a file: for timing
     and tests only), and the :class:`InferenceSettings` ``iters``, ``input_scale``, ``mirror_average``,
-    ``refine_scale``, ``refine_iters``, ``refine_min_scale``, ``refine_max_flow``, ``variational_levels``,
-    ``variational_iters`` and ``precision``: each None
+    ``refine_scale``, ``refine_iters``, ``refine_min_scale``, ``refine_max_flow``, ``patch_levels``,
+    ``variational_levels``, ``variational_iters``, ``quarter_refine`` and ``precision``: each None
     (the default) takes the weights file's own setting (the one its model card was measured with), or RAFT's
     (:data:`RAFT_DEFAULTS`) for files that carry none and for random weights.
     """
@@ -100,7 +100,7 @@ class RaftBackend:
                  refine_scale: float | None = None, refine_iters: int | None = None,
                  refine_min_scale: float | None = None, refine_max_flow: float | None = None,
                  patch_levels: int | None = None, variational_levels: int | None = None,
-                 variational_iters: int | None = None,
+                 variational_iters: int | None = None, quarter_refine: bool | None = None,
                  precision: str | None = None) -> None:
         if num_threads is not None:
             torch.set_num_threads(int(num_threads))
@@ -108,7 +108,7 @@ class RaftBackend:
                      "refine_scale": refine_scale, "refine_iters": refine_iters,
                      "refine_min_scale": refine_min_scale, "refine_max_flow": refine_max_flow,
                      "patch_levels": patch_levels, "variational_levels": variational_levels,
-                     "variational_iters": variational_iters,
+                     "variational_iters": variational_iters, "quarter_refine": quarter_refine,
                      "precision": precision}
         RAFT_DEFAULTS.replace(**overrides)           # bad values fail before any file is read
         self.warm_start = bool(warm_start)
@@ -166,6 +166,7 @@ class RaftBackend:
     refine_max_flow = property(lambda self: self.settings.refine_max_flow)
     patch_levels = property(lambda self: self.settings.patch_levels)
     variational_levels = property(lambda self: self.settings.variational_levels)
+    quarter_refine = property(lambda self: self.settings.quarter_refine)
 
     @property
     def device(self) -> str:
@@ -240,11 +241,12 @@ def estimate_flow(model: RAFT, img1: np.ndarray, img2: np.ndarray, settings: Inf
     autocast = (torch.autocast(device.type, torch.bfloat16) if precision == "bf16" else nullcontext())
     with autocast:
         flow, low = _one_pass(model, img1, img2, settings.iters, settings.input_scale, flow_init, previous_low,
-                              padding_mode, device, settings.mirror_average, known_features, features_out)
+                              padding_mode, device, settings.mirror_average, known_features, features_out,
+                              settings.quarter_refine)
         if settings.refine_scale:
             scale = refinement_scale(flow, settings.refine_scale, settings.refine_min_scale, settings.refine_max_flow)
             flow, _ = _one_pass(model, img1, img2, settings.refine_iters, scale, flow, None, padding_mode, device,
-                                settings.mirror_average)
+                                settings.mirror_average, quarter_refine=settings.quarter_refine)
     if settings.patch_levels:
         flow = patch_refine(img1, img2, flow, settings.patch_levels)
     if settings.variational_levels:
@@ -264,7 +266,7 @@ def refinement_scale(flow: np.ndarray, refine_scale: float, min_scale: float, ma
 def _one_pass(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input_scale: float,
               flow_init: np.ndarray | None, previous_low: torch.Tensor | None, padding_mode: str,
               device: torch.device | str, mirror_average: bool, known_features: tuple | None = None,
-              features_out: dict | None = None) -> tuple[np.ndarray, torch.Tensor]:
+              features_out: dict | None = None, quarter_refine: bool = True) -> tuple[np.ndarray, torch.Tensor]:
     """One RAFT pass: (H×W×2 float32 flow, 1/8-resolution flow).
 
     The frames are enlarged by ``input_scale`` (when not 1) and padded to multiples of 8; the flow is
@@ -305,7 +307,7 @@ def _one_pass(model: RAFT, img1: np.ndarray, img2: np.ndarray, iters: int, input
         t1, t2 = torch.cat([t1, torch.flip(t1, dims=[-1])]), torch.cat([t2, torch.flip(t2, dims=[-1])])
         init = None if init is None else torch.cat([init, mirror_flow(init)])
     fmap1, fquarter1 = known_features if known_features is not None else (None, None)
-    out = model(t1, t2, iters=iters, flow_init=init, fmap1=fmap1, fquarter1=fquarter1)
+    out = model(t1, t2, iters=iters, flow_init=init, fmap1=fmap1, fquarter1=fquarter1, quarter_refine=quarter_refine)
     if features_out is not None:
         features_out["fmap2"], features_out["fquarter2"] = out.fmap2, out.fquarter2
     flow_up, flow_low = out.flow_up, out.flow_low

@@ -123,7 +123,8 @@ class RAFT(nn.Module):
 
     def forward(self, image1: torch.Tensor, image2: torch.Tensor, iters: int = 12,
                 flow_init: torch.Tensor | None = None, all_predictions: bool = False,
-                fmap1: torch.Tensor | None = None, fquarter1: torch.Tensor | None = None) -> RaftOutput:
+                fmap1: torch.Tensor | None = None, fquarter1: torch.Tensor | None = None,
+                quarter_refine: bool = True) -> RaftOutput:
         n, _, h, w = image1.shape
         if image2.shape != image1.shape:
             raise ValueError(f"images differ in shape: {tuple(image1.shape)} vs {tuple(image2.shape)}")
@@ -134,7 +135,7 @@ class RAFT(nn.Module):
         image2 = 2.0 * (image2 / 255.0) - 1.0
 
         # 1. features of both frames (one batch), context of the first (and their quarter-resolution maps)
-        quarter = self.refiner is not None
+        quarter = self.refiner is not None and quarter_refine     # False: a model that has one skips it
         if fmap1 is not None and quarter and fquarter1 is None:
             raise ValueError("known first-frame features need their quarter-resolution features (fquarter1) too "
                              "with the quarter-resolution refinement")

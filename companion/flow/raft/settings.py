@@ -30,7 +30,9 @@ class InferenceSettings:
     flow refined by DIS's patch search (:func:`.variational.patch_refine`) on this many scales, the coarsest at
     1/2**(patch_levels-1) of the frame (0: none); ``variational_levels``: then
     the flow refined by the images' own gradients (:mod:`.variational`) on this many scales, coarse to fine,
-    with ``variational_iters`` fixed-point iterations each (0: RAFT's flow as it is); ``precision``: "bf16"
+    with ``variational_iters`` fixed-point iterations each (0: RAFT's flow as it is); ``quarter_refine``: a
+    model with a quarter-resolution refinement head (RAFT-small-refined) runs it (False: skips it and its
+    quarter-resolution features, as when DIS's patch search refines the flow anyway); ``precision``: "bf16"
     (the network under bf16 autocast; correlation, upsampling and the flow itself stay float32), "fp32", or
     "auto" (bf16 on a CPU with AVX512-BF16 or AMX, else fp32, see :func:`resolve_precision`).
 
@@ -48,6 +50,7 @@ class InferenceSettings:
     patch_levels: int = 0
     variational_levels: int = 0
     variational_iters: int = 10
+    quarter_refine: bool = True
     precision: str = "fp32"
 
     def validated(self) -> InferenceSettings:
@@ -86,8 +89,9 @@ class InferenceSettings:
         for key in ("input_scale", "refine_scale", "refine_min_scale", "refine_max_flow"):
             if key in kept:
                 kept[key] = float(kept[key])
-        if "mirror_average" in kept:
-            kept["mirror_average"] = bool(kept["mirror_average"])
+        for key in ("mirror_average", "quarter_refine"):
+            if key in kept:
+                kept[key] = bool(kept[key])
         return dataclasses.replace(self, **kept).validated()
 
     def as_record(self) -> dict:
@@ -162,6 +166,8 @@ def describe_settings(settings: InferenceSettings) -> str:
         text += " (one pass)"
     if settings.mirror_average:
         text += ", mirror-averaged"
+    if not settings.quarter_refine:
+        text += ", no quarter-resolution head"
     if settings.patch_levels:
         text += f", DIS patch refinement on {settings.patch_levels} scale" + ("s" if settings.patch_levels > 1 else "")
     if settings.variational_levels:
