@@ -16,10 +16,9 @@ import numpy as np
 import pytest
 
 from sitl_vehicle.airframes import AIRFRAMES
-from sitl_vehicle.commander import Commander, VehicleStatus
 from sitl_vehicle.control.mixer import Mixer
 from sitl_vehicle.modes import FlightMode
-from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore, bound_specs
+from sitl_vehicle.server import ServerConfig, VehicleServer
 from sitl_vehicle.sim import Setpoint, VehicleConfig, VehicleSim
 from sitl_vehicle.wind import WindConfig
 
@@ -74,46 +73,43 @@ def test_a_body_rate_upset_while_climbing_in_gusty_wind_is_recovered(seed, rates
 
 
 def test_the_hard_0999559861_offboard_step_in_wind_no_longer_flips():
-    """The flight's own timeline (seed, wind, start, commander, setpoints as in its tlog), without sockets."""
-    sim = VehicleSim(VehicleConfig(wind=WindConfig(2.05, 0.76, 357.8)), rng=np.random.default_rng(1698718304),
-                     initial_position=(-0.03, -0.837, 0.0), initial_yaw=math.radians(-14.004155605080367))
-    params = ParameterStore(COMMANDER_PARAMS + bound_specs({"control": sim.config.control,
-                                                            "planner": sim.config.planner}))
-    params.set("MIS_TAKEOFF_ALT", 1.943)
-    commander = Commander(params)
-
-    def status() -> VehicleStatus:
-        e = sim.estimate
-        return VehicleStatus(time_s=sim.time_s, position=e.position, velocity=e.velocity, yaw=e.euler()[2],
-                             armed=sim.armed, landed=sim.landed, crashed=sim.crashed)
-
+    """The flight's own timeline (seed, wind, start, setpoints as in its tlog), on the vehicle server's own
+    commander, status and 50 Hz tick (its links bound to ephemeral loopback ports and never read)."""
+    config = ServerConfig(vehicle=VehicleConfig(wind=WindConfig(2.05, 0.76, 357.8)), seed=1698718304,
+                          start_position=(-0.03, -0.837, 0.0), start_yaw=math.radians(-14.004155605080367),
+                          params=(("MIS_TAKEOFF_ALT", 1.943),), gcs_local=("127.0.0.1", 0), gcs_remote=None,
+                          api_local=("127.0.0.1", 0), api_remote=None, truth_local=("127.0.0.1", 0),
+                          truth_remote=None)
+    server = VehicleServer(config)
+    sim, commander = server.sim, server.commander
     hold = Setpoint(position=(-0.049, -0.842, -1.932), yaw=-0.245)
     step = Setpoint(position=(0.152, -0.869, -1.956), yaw=-0.245)
     armed = offboard = False
     next_tick = 0.0
     max_tilt = 0.0
     z_min_alt = math.inf
-    while sim.time_s < 6.0:
-        t = sim.time_s
-        if t >= 0.062 and not armed:
-            armed = True
-            assert commander.arm(status()).accepted and commander.takeoff(status(), 1.943).accepted
-        if t >= 2.449:
-            commander.offboard_setpoint(step if t >= 3.5 - 1e-9 else hold, t)
-        if t >= 3.41 and not offboard:
-            offboard = True
-            assert commander.set_mode(FlightMode.OFFBOARD, status()).accepted
-        if t + 1e-9 >= next_tick:                                       # the server's 50 Hz commander tick
-            out = commander.update(status())
-            if out.armed != sim.armed:
-                sim.set_armed(out.armed)
-            sim.set_setpoint(out.setpoint)
-            next_tick += 0.02
-        sim.step()
-        if offboard:
-            max_tilt = max(max_tilt, _tilt(sim))
-            z_min_alt = min(z_min_alt, -sim.truth.position[2])
-        assert not sim.crashed, sim.crash_reason
+    try:
+        while sim.time_s < 6.0:
+            t = sim.time_s
+            if t >= 0.062 and not armed:
+                armed = True
+                status = server.vehicle_status()
+                assert commander.arm(status).accepted and commander.takeoff(status, 1.943).accepted
+            if t >= 2.449:
+                commander.offboard_setpoint(step if t >= 3.5 - 1e-9 else hold, t)
+            if t >= 3.41 and not offboard:
+                offboard = True
+                assert commander.set_mode(FlightMode.OFFBOARD, server.vehicle_status()).accepted
+            if t + 1e-9 >= next_tick:                                   # the server's 50 Hz commander tick
+                server.commander_tick()
+                next_tick += 1.0 / config.commander_hz
+            sim.step()
+            if offboard:
+                max_tilt = max(max_tilt, _tilt(sim))
+                z_min_alt = min(z_min_alt, -sim.truth.position[2])
+            assert not sim.crashed, sim.crash_reason
+    finally:
+        server.close()
     assert math.degrees(max_tilt) < 35.0
     assert z_min_alt > 1.8
     assert sim.truth.position == pytest.approx((0.152, -0.869, -1.956), abs=0.1)
