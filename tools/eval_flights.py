@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from companion.flow.registry import DEFAULT_FLOW
 from scenes.capture import CaptureSpec
 from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
 
@@ -296,7 +297,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--latency", type=float, default=0.0, metavar="S",
                    help="the companion's camera-to-setpoint latency (default 0; in lockstep, what perception "
                         "costs in simulated time)")
-    p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
+    p.add_argument("--flow", default=DEFAULT_FLOW,
+                   help="companion flow backend (default %(default)s: the shipped RAFT; dis:fine for OpenCV DIS)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"])
     p.add_argument("-o", "--out", type=Path, default=Path("runs/eval_flights"),
                    help="output directory (default %(default)s)")

@@ -19,6 +19,7 @@ import threading
 import time
 from pathlib import Path
 
+from companion.flow.registry import DEFAULT_FLOW
 from sitl_vehicle.__main__ import triple_arg
 from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
 
@@ -61,7 +62,7 @@ DEFAULT_ALTITUDE_M = 1.5      # the suite's openings are centred near 1.5 m up; 
 
 
 def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: int = 0,
-           flow: str = "dis:fine", detector: str = "parallax", seed: int = 0, no_noise: bool = False,
+           flow: str = DEFAULT_FLOW, detector: str = "parallax", seed: int = 0, no_noise: bool = False,
            timeout_s: float = 300.0, images: bool = True, log_sink=sys.stdout, altitude: float | None = None,
            link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0,
            wind: tuple[float, ...] | None = None, yaw_deg: float | None = None,
@@ -223,7 +224,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="the companion's camera-to-setpoint latency (default 0; in lockstep, what perception "
                         "costs in simulated time)")
     p.add_argument("--instance", type=int, default=0, help="port offset, to run several flights at once")
-    p.add_argument("--flow", default="dis:fine", help="companion flow backend (default %(default)s)")
+    p.add_argument("--flow", default=DEFAULT_FLOW,
+                   help="companion flow backend (default %(default)s: the shipped RAFT; dis:fine for OpenCV DIS)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"], help="gap detector")
     p.add_argument("--link", default="pymavlink", choices=["pymavlink", "mavsdk"], help="companion link backend")
     p.add_argument("--seed", type=int, default=0, help="vehicle sensor-noise (and wind) seed")

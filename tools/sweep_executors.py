@@ -30,6 +30,7 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
+from companion.flow.registry import DEFAULT_FLOW
 from tools.eval_flights import InstancePool
 from tools.launch import launch
 from tools.link_faults import LinkFaults
@@ -45,7 +46,7 @@ class FlightFailed(RuntimeError):
 class FlightSettings:
     """What every flight of a sweep shares."""
 
-    flow: str = "dis:fine"
+    flow: str = DEFAULT_FLOW
     detector: str = "parallax"
     lockstep: bool = True
     speed: float = 2.0          # with lockstep False only

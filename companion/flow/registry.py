@@ -19,6 +19,11 @@ _BACKENDS: dict[str, str] = {
 }
 _FACTORIES: dict[str, Callable[..., FlowBackend]] = {}
 
+# What the companion flies unless told otherwise: the shipped RAFT-small-refined at its default inference
+# settings (2 iterations, DIS patch refinement; docs/perception.md), better than DIS fine on the suite, random
+# scenes and held-out pairs at about 3x its cost (bench/results.json).
+DEFAULT_FLOW = "raft"
+
 
 def register_flow_backend(name: str, factory: Callable[..., FlowBackend] | str) -> None:
     """Register a backend factory (a callable, or a lazy ``"module:attr"`` string) under ``name``."""
