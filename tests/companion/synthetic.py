@@ -9,10 +9,14 @@ FOCAL_320x240 = 120.0 / np.tan(np.radians(37.5))   # flowgap default camera: 320
 
 
 def translation_flow(h: int, w: int, t: tuple[float, float, float], polygon, *, rho_near: float = 0.5,
-                     rho_far: float = 0.05, focal: float = FOCAL_320x240, scale: float = 0.3):
+                     rho_far: float = 0.05, focal: float = FOCAL_320x240, scale: float = 0.3,
+                     occlusion: bool = False):
     """Flow of a translating camera (camera axes) seeing a near wall with a far region behind ``polygon``.
 
     Returns (flow H×W×2 float32, gap mask H×W bool).  ρ = 1/Z: near wall ``rho_near``, far ``rho_far``.
+    ``occlusion``: as a flow estimator sees it, the far pixels the wall covers in the second frame (p + d(p)
+    outside the polygon, d = the far surface's displacement against the wall's) have no match and take the
+    wall's flow; False gives every far pixel its true flow.
     """
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
     xs -= (w - 1) / 2.0
@@ -21,7 +25,14 @@ def translation_flow(h: int, w: int, t: tuple[float, float, float], polygon, *, 
     gv = ys * t[2] - focal * t[1]
     mask = np.zeros((h, w), np.uint8)
     cv2.fillPoly(mask, [np.asarray(polygon, np.int32)], 1)
-    rho = np.where(mask > 0, rho_far, rho_near)
+    far = mask > 0
+    if occlusion:
+        step = (rho_far - rho_near) * scale
+        lands = cv2.remap(mask, (xs + (w - 1) / 2.0 + step * gu).astype(np.float32),
+                          (ys + (h - 1) / 2.0 + step * gv).astype(np.float32), cv2.INTER_NEAREST,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        far &= lands > 0
+    rho = np.where(far, rho_far, rho_near)
     flow = np.stack([gu, gv], -1) * (rho * scale)[..., None]
     return flow.astype(np.float32), mask.astype(bool)
 

@@ -1,9 +1,13 @@
+import math
+
 import numpy as np
 import pytest
 
 from companion.gap import (
     CameraMotion,
     GapDetectorConfig,
+    ParallaxGapConfig,
+    clear_circle,
     detect_gap,
     detect_gap_in_colour,
     detect_gap_parallax,
@@ -14,6 +18,37 @@ from tests.companion.synthetic import FOCAL_320x240, iou, translation_flow
 H, W = 240, 320
 QUAD = [(130, 90), (200, 95), (195, 160), (125, 150)]
 CORNER_QUAD = [(40, 40), (120, 50), (110, 120), (50, 110)]
+IDEAL = ParallaxGapConfig(occlusion_fill=None)   # for flows with nothing hidden: no band to fill back
+
+
+@pytest.mark.parametrize("t, polygon", [
+    ((1.0, 0.0, 0.2), QUAD),            # mostly sideways: the band on the side it moves to is hidden
+    ((-1.0, 0.0, 0.2), QUAD),           # ... the other way
+    ((0.0, 1.0, 0.3), QUAD),            # downwards
+    ((0.3, 0.0, 1.0), CORNER_QUAD),     # forward, the opening off to the side of the focus of expansion
+])
+def test_the_band_the_wall_hides_in_the_second_frame_is_filled_back(t, polygon):
+    # The far pixels that land behind the wall in the second frame take the wall's flow, as an estimator gives
+    # them: read as is, the mask loses that band and its clear centre moves away from it.
+    flow, truth = translation_flow(H, W, t, polygon, occlusion=True)
+    cut = detect_gap_parallax(flow, IDEAL)
+    filled = detect_gap_parallax(flow)                  # the default: 0.75 of the modelled band
+    full = detect_gap_parallax(flow, ParallaxGapConfig(occlusion_fill=1.0))
+    lost = truth & ~cut.mask
+    assert lost.sum() > 0.05 * truth.sum()              # the case is real
+    assert (truth & ~filled.mask).sum() < 0.5 * lost.sum()
+    assert iou(full.mask, truth) > iou(filled.mask, truth) > iou(cut.mask, truth)
+    assert iou(full.mask, truth) >= 0.93                 # the union leaves the corners of the cut side
+    # never more than a pixel or two of wall taken for the opening
+    assert (full.mask & ~truth).sum() <= 0.02 * truth.sum()
+    true_centre = clear_circle(truth)[0]
+    assert math.dist(full.clear_centre, true_centre) < math.dist(cut.clear_centre, true_centre)
+
+
+def test_moving_toward_an_opening_around_the_focus_of_expansion_hides_nothing_and_fills_nothing():
+    flow, truth = translation_flow(H, W, (0.0, 0.0, 1.0), QUAD, occlusion=True)
+    assert np.array_equal(flow, translation_flow(H, W, (0.0, 0.0, 1.0), QUAD)[0])
+    assert np.array_equal(detect_gap_parallax(flow).mask, detect_gap_parallax(flow, IDEAL).mask)
 
 
 @pytest.mark.parametrize("detector", [detect_gap, detect_gap_parallax])
@@ -24,8 +59,8 @@ CORNER_QUAD = [(40, 40), (120, 50), (110, 120), (50, 110)]
     ((0.3, 0.0, 1.0), CORNER_QUAD),     # forward + lateral
 ])
 def test_low_flow_polygon_in_expansion_field(detector, t, polygon):
-    flow, truth = translation_flow(H, W, t, polygon)
-    result = detector(flow)
+    flow, truth = translation_flow(H, W, t, polygon)    # ideal: every far pixel has its true flow
+    result = detector(flow) if detector is detect_gap else detector(flow, IDEAL)
     assert result.found, result.reason
     assert iou(result.mask, truth) >= 0.95
     ys, xs = np.nonzero(truth)

@@ -8,12 +8,14 @@ can be met exactly; rectangles and triangles have their centroids and areas from
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import cv2
 import numpy as np
 import pytest
 
+from companion import gap
 from companion.flow.colour import flow_to_colour
 from companion.gap import (
     CameraMotion,
@@ -26,7 +28,6 @@ from companion.gap import (
     clear_circle,
     detect_gap,
     detect_gap_in_colour,
-    detect_gap_parallax,
     estimate_translation,
     far_region,
     get_detector,
@@ -40,6 +41,14 @@ H, W, F = 60, 80, 50.0
 LATERAL = CameraMotion(translation=(1.0, 0.0, 0.0), focal_px=F)
 # what the parallax detector does to the far class, switched off so that the mask is exactly the drawn region
 RAW = dict(border_px=0, median_ksize=1, open_ksize=1, close_ksize=1)
+
+
+def detect_gap_parallax(flow, config: ParallaxGapConfig | None = None, motion: CameraMotion | None = None):
+    """The parallax detector on this module's idealised flows, where every far pixel has its true flow (none is
+    hidden by the wall in the second frame): without the occlusion fill, which would add a band the flow never
+    lost (the fill has its own tests in test_gap.py)."""
+    return gap.detect_gap_parallax(flow, dataclasses.replace(config or ParallaxGapConfig(), occlusion_fill=None),
+                                   motion or CameraMotion())
 
 
 def lateral_flow(far: np.ndarray, rho_near: float = 0.5, rho_far: float = 0.25) -> np.ndarray:
@@ -72,7 +81,7 @@ def test_area_fraction_is_area_over_the_frame():
 
 
 def test_detectors_are_registered_by_name_and_an_unknown_name_is_refused_with_the_choices():
-    assert get_detector("paper") is detect_gap and get_detector("parallax") is detect_gap_parallax
+    assert get_detector("paper") is detect_gap and get_detector("parallax") is gap.detect_gap_parallax
     with pytest.raises(KeyError) as err:
         get_detector("canny")
     assert "unknown gap detector 'canny'; choose from ['paper', 'parallax']" in str(err.value)
