@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tools.tlog.replay import ReplayError, read_jsonl
+
 log = logging.getLogger(__name__)
 
 SIDEWAYS_RATIO = 0.6   # a pair is sideways when its across-heading motion exceeds this fraction of its forward one
@@ -72,10 +74,11 @@ def _pairs_of(run: Path) -> list[tuple[Path, Path, int, dict]]:
         scene = run / "scenes" / f"{flight.name.rsplit('-', 1)[0]}.json"
         if not scene.is_file():
             continue
-        frames = {}
-        for line in (flight / "companion" / "frames.jsonl").read_text().splitlines():
-            record = json.loads(line)
-            frames[record["step"]] = record
+        try:
+            frames = {f["step"]: f for f in read_jsonl(flight / "companion" / "frames.jsonl")}
+        except ReplayError as exc:     # a flight stopped mid-write: the others still count
+            log.warning("skipping %s: %s", flight.name, exc)
+            continue
         pairs += [(flight, scene, step, frames) for step in sorted(frames) if step - 1 in frames]
     return pairs
 

@@ -42,6 +42,20 @@ def test_a_folder_that_is_no_flight_sweep_is_refused_in_one_line(tmp_path, capsy
     assert "\n" not in err and "not a flowgap-eval-flights output" in err and "-o folder" in err
 
 
+def test_a_flight_whose_frame_log_was_cut_short_is_skipped_with_a_warning_that_names_it(tmp_path, caplog):
+    from scenes.library import suite_spec
+
+    run = tmp_path / "sweep"
+    (run / "scenes").mkdir(parents=True)
+    suite_spec("window1", "brick").save(run / "scenes" / "window1_brick.json")
+    frames = run / "window1_brick-0" / "companion"
+    frames.mkdir(parents=True)
+    (frames / "frames.jsonl").write_text('{"step": 0, "position_true": [1.8, 0.1, -1.5]}\n{"step": 1, "posi')
+    assert flown_masks.main([str(run), "--flow", "dis:fine", "-o", str(tmp_path / "out")]) == 0
+    assert "skipping window1_brick-0" in caplog.text and "frames.jsonl:2 is not valid JSON" in caplog.text
+    assert json.loads((tmp_path / "out" / "flown_masks.json").read_text())["rows"] == []
+
+
 def test_a_bad_fill_is_refused_by_the_parser(capsys):
     with pytest.raises(SystemExit):
         flown_masks.main(["runs", "--fill", "most"])

@@ -20,7 +20,9 @@ class ReplayError(ValueError):
     """The run directory cannot be replayed; the message says why."""
 
 
-def _read_jsonl(path: Path) -> list[dict]:
+def read_jsonl(path: Path) -> list[dict]:
+    """The records of a run log's ``.jsonl`` file; :class:`ReplayError` naming the file (and line) when it is
+    missing or not JSON."""
     if not path.exists():
         raise ReplayError(f"{path} is missing: is this a flowgap-companion run directory?")
     rows = []
@@ -49,8 +51,8 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     if not summary_path.exists():
         raise ReplayError(f"{summary_path} is missing: is {run_dir} a flowgap-companion run directory?")
     summary = json.loads(summary_path.read_text())
-    frames = {f["step"]: f for f in _read_jsonl(run_dir / "frames.jsonl")}
-    decisions = {d["step"]: d for d in _read_jsonl(run_dir / "decisions.jsonl")}
+    frames = {f["step"]: f for f in read_jsonl(run_dir / "frames.jsonl")}
+    decisions = {d["step"]: d for d in read_jsonl(run_dir / "decisions.jsonl")}
     if 0 not in frames or len(frames) < 2:
         raise ReplayError(f"{run_dir / 'frames.jsonl'} holds {len(frames)} frames: nothing to replay")
     flow_spec = flow or summary["flow"]
