@@ -38,6 +38,8 @@ from companion.servo import (
     push_waypoints,
     servo_step,
     wall_distance_from_flow,
+    wall_forward_at,
+    wall_slope,
     wall_yaw_from_flow,
 )
 from companion.storyboard import Storyboard, StoryRow, step_text
@@ -302,7 +304,8 @@ class Mission:
         waypoint = start
         step = servo_step(None, 0.0, 0, width, height, cfg)
         wall_distance = None
-        wall_estimates: list[float] = []  # forward coordinate of the wall, one per measurement
+        wall_estimates: list[tuple[float, float]] = []  # (forward coordinate of the wall, across coordinate
+                                                        # measured from), one per measurement
         rough_estimates: list[float] = []  # ... and from frames without a gap too (a safety bound only)
         far_estimates: list[float] = []   # ... and of the far surface seen through the opening
         yaw_estimates: list[float] = []   # how far the wall is turned against the heading (rad)
@@ -344,18 +347,24 @@ class Mission:
             measured = wall_distance_from_flow(flow, gaps, moved) if found else None
             if measured is not None and not 0.3 <= measured <= 10.0:
                 measured = None
-            here = self._forward(position)
+            here, across = self._forward(position), self._across(position)[0]
             if measured is not None:
-                wall_estimates.append(here + measured)
+                wall_estimates.append((here + measured, across))
             # Without a gap the wall is still measured, for one purpose only: not to walk into it blind.
             rough = measured if found or still else wall_distance_from_flow(flow, None, moved)
             if rough is not None and 0.3 <= rough <= 10.0:
                 rough_estimates.append(here + rough)
-            # Each measurement places the wall in the world; their median is robust to the bad ones, and
-            # the distance ahead follows the vehicle's own motion between measurements.
+            if found and moved >= 0.08:
+                turned = wall_yaw_from_flow(flow, gaps, focal)
+                if turned is not None:
+                    yaw_estimates.append(turned)
+            wall_yaw = float(np.median(yaw_estimates[-5:])) if len(yaw_estimates) >= 3 else None
+            # Each measurement places the wall in the world (carried along it to where the vehicle is, when it is
+            # turned); their median is robust to the bad ones, and the distance ahead follows the vehicle's own
+            # motion between measurements.
             # A distance enters the push decision only once three measurements agree on a median.
             enough = len(wall_estimates) >= self.config.min_wall_measurements
-            wall_distance = float(np.median(wall_estimates)) - here if enough else None
+            wall_distance = wall_forward_at(wall_estimates, across, wall_yaw) - here if enough else None
             if wall_distance is not None and wall_prior is not None and \
                     wall_distance > wall_prior - here + self.config.search_wall_slack_m:
                 # a look's reading well beyond where earlier looks put the wall is not the wall (measured: by a
@@ -363,13 +372,10 @@ class Mission:
                 wall_distance = wall_prior - here
             axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), self.camera.K, prev_attitude[0],
                                 prev_attitude[1])
-            seen_from = self._forward(prev_position)
-            seen_distance = wall_distance + (here - seen_from) if wall_distance is not None else None
-            if found and moved >= 0.08:
-                turned = wall_yaw_from_flow(flow, gaps, focal)
-                if turned is not None:
-                    yaw_estimates.append(turned)
-            wall_yaw = float(np.median(yaw_estimates[-5:])) if len(yaw_estimates) >= 3 else None
+            # the wall straight ahead of where the first frame (whose pixels the masks live in) was taken
+            seen_from, seen_across = self._forward(prev_position), self._across(prev_position)[0]
+            seen_distance = (wall_distance + (here - seen_from) + (seen_across - across) * wall_slope(wall_yaw)
+                             if wall_distance is not None else None)
             sight = openings.observe(candidates, self._across(prev_position), seen_distance, focal, width, height,
                                      axis, moved, wall_yaw, viewer_m=self._across(position))
             if sight.note:
@@ -404,6 +410,14 @@ class Mission:
                     if ahead is not None:
                         forward = min(forward, max(0.0, ahead - cfg.hold_distance_m))
                     next_step = dataclasses.replace(next_step, delta_heading=(forward, 0.0, 0.0), push=False)
+                elif wall_prior is not None and wall_distance is None:
+                    # a look steering by the image alone, its wall not measured yet, is as blind to the wall as
+                    # one seeing nothing: no nearer than the hold distance to where earlier looks put it, and no
+                    # push (measured, hard world seed 46: a look whose target was a stale image position walked
+                    # 2 m on and into the wall)
+                    forward = min(next_step.delta_heading[0], max(0.0, ahead - cfg.hold_distance_m))
+                    next_step = dataclasses.replace(
+                        next_step, delta_heading=(forward, *next_step.delta_heading[1:]), push=False)
             else:
                 next_step = metric_step(sight.offset_m, sight.clear_radius_m, wall_distance, area_frac, k + 1, cfg,
                                         normalised_error(used, width, height), sight.clearance_here_m,
@@ -447,6 +461,9 @@ class Mission:
             if next_step.push:
                 break
         else:
+            if step.offset_m is None and wall_prior is not None:   # a look pushes only what it has placed
+                raise Refusal(f"no opening placed within {cfg.step_budget} steps: not flying through",
+                              openings.world.used)
             if step.offset_m is not None:    # the metric law pushes only a sphere it has seen clear the edges
                 raise Refusal(f"could not centre on the opening within {cfg.step_budget} steps (still "
                               f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed"
@@ -455,7 +472,7 @@ class Mission:
         self.result.wall_distance_m = wall_distance
         here = self._forward(prev_position)
         if wall_distance is None and wall_estimates:  # fewer than the minimum: still better than nothing
-            wall_distance = float(np.median(wall_estimates)) - here
+            wall_distance = float(np.median([forward for forward, _ in wall_estimates])) - here
         if far_estimates:
             self.result.far_distance_m = float(np.median(far_estimates)) - here
         # The push starts from where the vehicle was at the last frame, not from the waypoint it was still on

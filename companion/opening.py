@@ -34,7 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.servo import ServoConfig, alignment_tolerance, metric_offset, normalised_error
+from companion.servo import (
+    TURN_NEGLIGIBLE_RAD,
+    ServoConfig,
+    alignment_tolerance,
+    metric_offset,
+    normalised_error,
+)
 from companion.tracking import ConfirmingCentroidFilter, TrackingConfig
 
 Point = tuple[float, float]
@@ -139,7 +145,8 @@ class OpeningTracker:
         the wall is turned against the camera's axis, when measured (an opening seen at an angle looks narrower
         than it is in the wall, where the body crosses it)."""
         viewer = across_m if viewer_m is None else viewer_m
-        stretch = 1.0 / math.cos(wall_yaw_rad) if wall_yaw_rad is not None and abs(wall_yaw_rad) > 0.05 else 1.0
+        stretch = (1.0 / math.cos(wall_yaw_rad) if wall_yaw_rad is not None and abs(wall_yaw_rad) > TURN_NEGLIGIBLE_RAD
+                   else 1.0)
 
         walled: dict[int, tuple[np.ndarray, float]] = {}
 

@@ -232,6 +232,25 @@ def test_the_walls_turn_is_read_from_the_plane_of_its_inverse_depth():
         assert wall_yaw_from_flow(flow, None, f) == pytest.approx(t, abs=0.01)
 
 
+def test_a_turned_walls_readings_are_carried_along_it_to_where_the_vehicle_is():
+    from companion.servo import TURN_NEGLIGIBLE_RAD, wall_forward_at
+
+    turn = math.radians(16.5)                         # positive: the wall's right side further away
+
+    def wall_at(across):
+        return 3.0 + across * math.tan(turn)
+    # read while flying 1.2 m to the right, each reading a little off
+    readings = [(wall_at(a) + e, a) for a, e in ((-1.0, 0.02), (-0.6, -0.01), (-0.2, 0.0), (0.2, 0.01))]
+    assert wall_forward_at(readings, 0.6, turn) == pytest.approx(wall_at(0.6), abs=0.01)
+    assert wall_forward_at(readings, -1.0, turn) == pytest.approx(wall_at(-1.0), abs=0.01)
+    # the plain median, the turn unmeasured, is the wall where the readings were taken: 0.24 m short here
+    assert wall_forward_at(readings, 0.6, None) == pytest.approx(wall_at(-0.4), abs=0.01)
+    # a turn under the negligible one is taken as none (a wall facing the camera, its turn read as noise)
+    small = 0.9 * TURN_NEGLIGIBLE_RAD
+    assert wall_forward_at(readings, 0.6, small) == wall_forward_at(readings, 0.6, None)
+    assert wall_forward_at([(2.0, 0.0)], 5.0, -turn) == pytest.approx(2.0 - 5.0 * math.tan(turn))
+
+
 def test_an_opening_seen_at_an_angle_is_judged_at_its_width_in_the_wall():
     from companion.opening import in_wall
 

@@ -307,3 +307,34 @@ def test_a_look_is_bounded_by_the_nearest_wall_any_earlier_look_allows():
     assert search_wall_bound([far_wrong], 0.0, turn, margin) > 3.5
     assert search_wall_bound([far_wrong, (3.0, -0.5, None)], 0.0, turn, margin) == pytest.approx(
         3.0 - 0.5 * math.tan(turn))
+
+
+def test_a_look_steering_by_the_image_alone_keeps_off_the_wall_earlier_looks_placed(tmp_path):
+    """A look (``wall_prior`` from earlier looks) whose detector shows an "opening" but whose wall is never measured
+    (zero flow: no parallax) steers by the image alone: it goes no nearer than the hold distance to the prior, and
+    at the end of its step budget it refuses instead of pushing what it never placed (measured, hard world seed
+    46: such a look walked 2 m on, into the wall)."""
+    from companion.mission import Refusal
+    from companion.servo import ServoConfig
+
+    class Moving(ScriptedLink):
+        def __init__(self):
+            super().__init__()
+            self.setpoints = []
+            self.telemetry.armed = True
+
+        def set_position_target(self, position, yaw) -> None:
+            super().set_position_target(position, yaw)
+            self.setpoints.append(tuple(position))
+
+    link = Moving()
+    link.telemetry.position = (0.0, 0.0, -1.5)
+    mission = Mission(link, StillCamera(), ZeroFlow(), HalfTheFrame(), RunLog(tmp_path, images=False),
+                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01, min_baseline_m=0.0))
+    mission.yaw = 0.0                                  # heading north: forward is the north coordinate
+    prior = 2.0                                        # the nearest the wall's face can be, 2 m ahead
+    with pytest.raises(Refusal, match="no opening placed within 30 steps"):
+        mission._servo((0.0, 0.0, -1.5), (), prior, (0.0, 1.2))
+    hold = ServoConfig().hold_distance_m
+    assert max(p[0] for p in link.setpoints) <= prior - hold + 1e-9
+    assert max(p[0] for p in link.setpoints) > prior - hold - 0.2    # it did walk up to there
