@@ -418,8 +418,7 @@ def _fill_occluded(contour: np.ndarray, rho: np.ndarray, measurable: np.ndarray,
     mask = np.zeros((h, w), np.uint8)
     cv2.drawContours(mask, [contour], -1, 1, thickness=cv2.FILLED)
     inner = cv2.erode(mask, np.ones((5, 5), np.uint8)).astype(bool) & measurable
-    grown = cv2.dilate(mask, np.ones((2 * ring_px + 1,) * 2, np.uint8)).astype(bool)
-    ring = grown & ~cv2.dilate(mask, np.ones((5, 5), np.uint8)).astype(bool) & measurable
+    ring = _within(mask, ring_px) & ~_within(mask, 2) & measurable
     if inner.sum() < 20 or ring.sum() < 20:
         return contour
     step = fraction * (float(np.median(rho[inner])) - float(np.median(rho[ring])))

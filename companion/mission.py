@@ -347,7 +347,8 @@ class Mission:
             measured = wall_distance_from_flow(flow, gaps, moved) if found else None
             if measured is not None and not 0.3 <= measured <= 10.0:
                 measured = None
-            here, across = self._forward(position), self._across(position)[0]
+            here, place = self._forward(position), self._across(position)   # place: (right, down) now
+            across = place[0]
             if measured is not None:
                 wall_estimates.append((here + measured, across))
             # Without a gap the wall is still measured, for one purpose only: not to walk into it blind.
@@ -373,11 +374,11 @@ class Mission:
             axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), self.camera.K, prev_attitude[0],
                                 prev_attitude[1])
             # the wall straight ahead of where the first frame (whose pixels the masks live in) was taken
-            seen_from, seen_across = self._forward(prev_position), self._across(prev_position)[0]
-            seen_distance = (wall_distance + (here - seen_from) + (seen_across - across) * wall_slope(wall_yaw)
+            seen_from, seen_place = self._forward(prev_position), self._across(prev_position)
+            seen_distance = (wall_distance + (here - seen_from) + (seen_place[0] - across) * wall_slope(wall_yaw)
                              if wall_distance is not None else None)
-            sight = openings.observe(candidates, self._across(prev_position), seen_distance, focal, width, height,
-                                     axis, moved, wall_yaw, viewer_m=self._across(position))
+            sight = openings.observe(candidates, seen_place, seen_distance, focal, width, height, axis, moved,
+                                     wall_yaw, viewer_m=place)
             if sight.note:
                 log.info("%s", sight.note)
                 self._event(sight.note)
@@ -399,7 +400,7 @@ class Mission:
             if ahead is not None:
                 # bounded as the look's own steps are: a look's reading beyond its bound (measured: by a wall's
                 # end, rough readings of what lies behind it) would start the next look too near the wall
-                self._wall_seen = (here + ahead, self._across(position)[0], wall_yaw)
+                self._wall_seen = (here + ahead, across, wall_yaw)
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
                 raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on")
             if sight.offset_m is None:

@@ -77,6 +77,18 @@ class ScriptedLink(AutopilotLink):
         self._do("land")
 
 
+class RecordingLink(ScriptedLink):
+    """A scripted autopilot that also keeps every position setpoint sent (the vehicle is at each at once)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.setpoints: list[tuple] = []
+
+    def set_position_target(self, position, yaw) -> None:
+        super().set_position_target(position, yaw)
+        self.setpoints.append(tuple(position))
+
+
 class StillCamera:
     width, height = 64, 48
     K = np.array([[40.0, 0, 32], [0, 40.0, 24], [0, 0, 1]])
@@ -164,16 +176,7 @@ def test_refused_it_looks_again_from_either_side_of_the_start_before_holding(tmp
     from companion.flow import make_flow_backend
     from companion.gap import get_detector
 
-    class Recording(ScriptedLink):
-        def __init__(self):
-            super().__init__()
-            self.setpoints = []
-
-        def set_position_target(self, position, yaw) -> None:
-            super().set_position_target(position, yaw)
-            self.setpoints.append(tuple(position))
-
-    link = Recording()
+    link = RecordingLink()
     mission = Mission(link, StillCamera(), make_flow_backend("dis", preset="fast"), get_detector("parallax"),
                       RunLog(tmp_path, images=False),
                       config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3,
@@ -317,18 +320,8 @@ def test_a_look_steering_by_the_image_alone_keeps_off_the_wall_earlier_looks_pla
     from companion.mission import Refusal
     from companion.servo import ServoConfig
 
-    class Moving(ScriptedLink):
-        def __init__(self):
-            super().__init__()
-            self.setpoints = []
-            self.telemetry.armed = True
-
-        def set_position_target(self, position, yaw) -> None:
-            super().set_position_target(position, yaw)
-            self.setpoints.append(tuple(position))
-
-    link = Moving()
-    link.telemetry.position = (0.0, 0.0, -1.5)
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)   # in the air, servoing
     mission = Mission(link, StillCamera(), ZeroFlow(), HalfTheFrame(), RunLog(tmp_path, images=False),
                       config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01, min_baseline_m=0.0))
     mission.yaw = 0.0                                  # heading north: forward is the north coordinate
