@@ -38,12 +38,12 @@ from companion.servo import (
     push_waypoints,
     servo_step,
     wall_distance_from_flow,
-    wall_forward_at,
     wall_slope,
     wall_yaw_from_flow,
 )
 from companion.storyboard import Storyboard, StoryRow, step_text
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
+from companion.wall import WallTrack
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +115,9 @@ class MissionConfig:
                                  # seen clear in the frame it pushes on (no push on a tracked place alone)
     search_walk_m: float = 1.0   # ... and starts this much further than the hold distance from it (room to walk
                                  # for parallax before the hold)
-    search_wall_slack_m: float = 0.3  # ... and takes the wall no further than that bound plus this
+    search_wall_slack_m: float = 0.3  # ... and takes the wall no further than that bound plus this, ...
+    search_wall_agree_m: float = 0.05      # ... unless its own latest min_wall_measurements readings agree within
+    search_wall_agree_per_m: float = 0.05  # this plus this per metre of its distance: then they are the wall
 
 
 @dataclass
@@ -304,11 +306,8 @@ class Mission:
         waypoint = start
         step = servo_step(None, 0.0, 0, width, height, cfg)
         wall_distance = None
-        wall_estimates: list[tuple[float, float]] = []  # (forward coordinate of the wall, across coordinate
-                                                        # measured from), one per measurement
-        rough_estimates: list[float] = []  # ... and from frames without a gap too (a safety bound only)
-        far_estimates: list[float] = []   # ... and of the far surface seen through the opening
-        yaw_estimates: list[float] = []   # how far the wall is turned against the heading (rad)
+        wall = WallTrack(wall_prior, self.config.min_wall_measurements, self.config.search_wall_slack_m,
+                         self.config.search_wall_agree_m, self.config.search_wall_agree_per_m)
         openings = OpeningTracker(cfg, self.openings, self.tracker, avoid, reach)
         focal = float(self.camera.K[0, 0])
         ever_seen = False
@@ -344,33 +343,20 @@ class Mission:
             # Only with a detected gap: its mask (every opening's) keeps the far pixels out of the wall's depth
             # statistic (measured: without one, readings of 0.7–0.9 m for a wall 2.8 m away pushed far too early).
             gaps = np.logical_or.reduce([d.mask for d in found]) if found else None
-            measured = wall_distance_from_flow(flow, gaps, moved) if found else None
-            if measured is not None and not 0.3 <= measured <= 10.0:
-                measured = None
             here, place = self._forward(position), self._across(position)   # place: (right, down) now
             across = place[0]
-            if measured is not None:
-                wall_estimates.append((here + measured, across))
-            # Without a gap the wall is still measured, for one purpose only: not to walk into it blind.
-            rough = measured if found or still else wall_distance_from_flow(flow, None, moved)
-            if rough is not None and 0.3 <= rough <= 10.0:
-                rough_estimates.append(here + rough)
-            if found and moved >= 0.08:
-                turned = wall_yaw_from_flow(flow, gaps, focal)
-                if turned is not None:
-                    yaw_estimates.append(turned)
-            wall_yaw = float(np.median(yaw_estimates[-5:])) if len(yaw_estimates) >= 3 else None
-            # Each measurement places the wall in the world (carried along it to where the vehicle is, when it is
-            # turned); their median is robust to the bad ones, and the distance ahead follows the vehicle's own
-            # motion between measurements.
-            # A distance enters the push decision only once three measurements agree on a median.
-            enough = len(wall_estimates) >= self.config.min_wall_measurements
-            wall_distance = wall_forward_at(wall_estimates, across, wall_yaw) - here if enough else None
-            if wall_distance is not None and wall_prior is not None and \
-                    wall_distance > wall_prior - here + self.config.search_wall_slack_m:
-                # a look's reading well beyond where earlier looks put the wall is not the wall (measured: by a
-                # wall's end, readings of 1.6-3.3 m for a wall 0.7 m ahead walked a vehicle into it)
-                wall_distance = wall_prior - here
+            measured = wall.add(
+                here, across, wall_distance_from_flow(flow, gaps, moved) if found else None,
+                # without a gap the wall is still measured, for one purpose only: not to walk into it blind
+                None if found or still else wall_distance_from_flow(flow, None, moved),
+                wall_yaw_from_flow(flow, gaps, focal) if found and moved >= 0.08 else None)
+            wall_yaw = wall.turn
+            # A distance enters the push decision only once three measurements agree on a median; a look's is
+            # bounded by where earlier looks put the wall, unless its own readings agree (measured, hard world seeds
+            # 46-48: bounds from sights taken 1.4-3 m across put the wall up to 1.4 m too near; looks stopped
+            # 1.3-2.3 m from it "with the wall 1.09 m ahead", or stalled 2.5 m out, their openings scaled by that
+            # wrong distance to half their size).
+            wall_distance, ahead = wall.view(here, across)
             axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), self.camera.K, prev_attitude[0],
                                 prev_attitude[1])
             # the wall straight ahead of where the first frame (whose pixels the masks live in) was taken
@@ -390,13 +376,8 @@ class Mission:
             area_frac = detection.area / float(width * height) if detection.found else 0.0
             far = (far_distance_from_flow(flow, detection.mask, moved)
                    if sight.detection is not None and openings.last_accepted else None)
-            if far is not None and (measured is None or far > measured) and far <= 20.0:
-                far_estimates.append(here + far)
-            ahead = wall_distance
-            if ahead is None and len(rough_estimates) >= self.config.min_wall_measurements:
-                ahead = float(np.median(rough_estimates[-self.config.min_wall_measurements:])) - here
-            if wall_prior is not None:
-                ahead = wall_prior - here if ahead is None else min(ahead, wall_prior - here)
+            if far is not None:
+                wall.add_far(here, far, measured)
             if ahead is not None:
                 # bounded as the look's own steps are: a look's reading beyond its bound (measured: by a wall's
                 # end, rough readings of what lies behind it) would start the next look too near the wall
@@ -472,10 +453,11 @@ class Mission:
                               "not flying through", openings.world.used)
         self.result.wall_distance_m = wall_distance
         here = self._forward(prev_position)
-        if wall_distance is None and wall_estimates:  # fewer than the minimum: still better than nothing
-            wall_distance = float(np.median([forward for forward, _ in wall_estimates])) - here
-        if far_estimates:
-            self.result.far_distance_m = float(np.median(far_estimates)) - here
+        if wall_distance is None:  # fewer readings than the minimum: still better than nothing
+            wall_distance = wall.fallback_distance(here)
+        far = wall.far_distance(here)
+        if far is not None:
+            self.result.far_distance_m = far
         # The push starts from where the vehicle was at the last frame, not from the waypoint it was still on
         # its way to (within the arrival tolerance): its last correction, the wall's and the far surface's
         # distances were all measured from there (measured, hard world seed 44: started from the waypoint

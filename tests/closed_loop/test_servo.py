@@ -251,6 +251,22 @@ def test_a_turned_walls_readings_are_carried_along_it_to_where_the_vehicle_is():
     assert wall_forward_at([(2.0, 0.0)], 5.0, -turn) == pytest.approx(2.0 - 5.0 * math.tan(turn))
 
 
+def test_wall_readings_agree_when_the_latest_lie_within_a_tolerance_that_grows_with_the_distance():
+    from companion.servo import wall_readings_agree
+
+    def agree(readings, here=0.0, turn=None):
+        return wall_readings_agree(readings, 0.0, turn, here, 3, 0.05, 0.05)
+    assert not agree([(3.0, 0.0), (3.0, 0.0)])                        # too few
+    assert agree([(3.6, 0.0), (3.0, 0.0), (3.05, 0.0), (2.96, 0.0)])  # the latest three, 0.09 m apart at 3 m
+    assert not agree([(3.0, 0.0), (3.2, 0.0), (2.96, 0.0)])           # 0.24 m apart: 0.2 allowed at 3 m
+    assert agree([(3.0, 0.0), (3.2, 0.0), (2.96, 0.0)], here=-1.0)    # ... 0.25 at 4 m
+    assert not agree([(1.6, 0.0), (3.3, 0.0), (1.7, 0.0)])            # past a wall's end: readings jump
+    # a turned wall read across 1 m: apart as read, together once carried along it to where the vehicle is
+    turn = math.radians(15.0)
+    turned = [(3.0 + a * math.tan(turn), a) for a in (-1.0, -0.5, 0.0)]
+    assert not agree(turned) and agree(turned, turn=turn)
+
+
 def test_an_opening_seen_at_an_angle_is_judged_at_its_width_in_the_wall():
     from companion.opening import in_wall
 

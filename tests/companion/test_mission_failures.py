@@ -331,3 +331,63 @@ def test_a_look_steering_by_the_image_alone_keeps_off_the_wall_earlier_looks_pla
     hold = ServoConfig().hold_distance_m
     assert max(p[0] for p in link.setpoints) <= prior - hold + 1e-9
     assert max(p[0] for p in link.setpoints) > prior - hold - 0.2    # it did walk up to there
+
+
+class WallFlow:
+    """The forward flow of a wall facing the camera at north coordinate ``wall_n``, for the step the vehicle made
+    since the last pair (where the link says it is); ``wrong_every``: every that many pairs, the flow of a surface
+    1.5 m behind the wall instead (what a look beyond a wall's end sees between readings of the wall)."""
+
+    def __init__(self, link: ScriptedLink, wall_n: float, wrong_every: int = 0) -> None:
+        self.link, self.wall_n, self.wrong_every = link, wall_n, wrong_every
+        self.before, self.pairs = link.telemetry.position[0], 0
+
+    def estimate(self, a, b):
+        here = self.link.telemetry.position[0]
+        moved, self.before = here - self.before, here
+        self.pairs += 1
+        depth = self.wall_n - here + (1.5 if self.wrong_every and self.pairs % self.wrong_every == 0 else 0.0)
+        h, w = a.shape[:2]
+        ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+        return np.stack([(xs - (w - 1) / 2) * moved / depth, (ys - (h - 1) / 2) * moved / depth], axis=-1)
+
+
+class SmallHole:
+    """A detector that sees an opening straight ahead, 2 px in clear radius: too small to fly through."""
+
+    def __call__(self, flow):
+        from companion.gap import GapDetection
+
+        h, w = flow.shape[:2]
+        ys, xs = np.mgrid[0:h, 0:w]
+        mask = (xs - (w - 1) / 2) ** 2 + (ys - (h - 1) / 2) ** 2 <= 4.0
+        centre = ((w - 1) / 2, (h - 1) / 2)
+        return GapDetection(mask, centre, float(mask.sum()), None, None, "fake", centre, 2.0)
+
+
+def _look(tmp_path, wall_n: float, prior: float, wrong_every: int = 0) -> RecordingLink:
+    from companion.mission import Refusal
+
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)   # in the air, a look's start
+    mission = Mission(link, StillCamera(), WallFlow(link, wall_n, wrong_every), SmallHole(),
+                      RunLog(tmp_path, images=False),
+                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01))
+    mission.yaw = 0.0                                  # heading north: forward is the north coordinate
+    with pytest.raises(Refusal):
+        mission._servo((0.0, 0.0, -1.5), (), prior, (0.0, 1.2))
+    return link
+
+
+def test_a_looks_own_agreeing_readings_are_the_wall_wherever_earlier_looks_allowed_it(tmp_path):
+    """MissionConfig.search_wall_agree_m: a look whose own wall readings agree takes them for the wall, though
+    earlier looks allowed it to be 1 m nearer: it walks on past that bound's hold distance, up to its own (measured,
+    hard world seeds 46-48: such bounds stopped looks 1.3-2.3 m from the wall, seeing nothing).  Readings that jump
+    (every third one 1.5 m beyond, as past a wall's end) are not believed beyond the bound."""
+    from companion.servo import ServoConfig
+
+    hold, wall, prior = ServoConfig().hold_distance_m, 3.5, 2.5
+    steady = max(p[0] for p in _look(tmp_path / "steady", wall, prior).setpoints)
+    assert prior - hold + 0.5 < steady <= wall - hold + 0.05
+    jumping = max(p[0] for p in _look(tmp_path / "jumping", wall, prior, wrong_every=3).setpoints)
+    assert jumping <= prior - hold + ServoConfig().forward_step_m

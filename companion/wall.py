@@ -1,0 +1,99 @@
+"""What one servo (the first look, or a look of the search) knows of the wall ahead (pure: no clock, no I/O).
+
+Each frame pair may read the wall's distance (with a gap in view, its mask kept out), a rough distance (without
+one: a safety bound only), the wall's turn against the heading, and the far surface seen through the opening.
+:class:`WallTrack` keeps them as places in the world along the initial heading, so that the distance ahead
+follows the vehicle's own motion between readings, and answers two questions a step:
+
+- the wall's distance: the median of the readings, each carried along a turned wall to where the vehicle is
+  (:func:`companion.servo.wall_forward_at`), once ``min_measurements`` are there;
+- how near the wall can be straight ahead (``ahead``): that distance, or the latest rough readings' median.
+
+A look of the search also has a ``prior``: the nearest the wall's face can be, from earlier looks
+(:func:`companion.mission.search_wall_bound`).  A reading beyond it plus ``slack_m`` is not believed, and the
+distance ahead is never taken beyond it, unless the look's own latest readings agree
+(:func:`companion.servo.wall_readings_agree`): then they are the wall.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from companion.servo import wall_forward_at, wall_readings_agree
+
+READING_RANGE_M = (0.3, 10.0)   # a wall reading outside this is no reading
+FAR_LIMIT_M = 20.0              # ... nor a far surface beyond this
+TURN_WINDOW = 5                 # the wall's turn is the median of this many latest readings ...
+TURN_MIN_READINGS = 3           # ... once there are this many
+
+
+class WallTrack:
+    def __init__(self, prior: float | None = None, min_measurements: int = 3, slack_m: float = 0.3,
+                 agree_m: float = 0.05, agree_per_m: float = 0.05) -> None:
+        self.prior = prior
+        self.min_measurements = min_measurements
+        self.slack_m, self.agree_m, self.agree_per_m = slack_m, agree_m, agree_per_m
+        self.readings: list[tuple[float, float]] = []  # (forward coordinate of the wall, across coordinate
+                                                       # measured from), one per reading
+        self.rough: list[float] = []   # ... the wall's forward coordinate, from frames without a gap too
+        self.far: list[float] = []     # ... and the far surface's, seen through the opening
+        self.turns: list[float] = []   # how far the wall is turned against the heading (rad)
+
+    def add(self, here: float, across: float, measured: float | None, rough: float | None,
+            turn: float | None) -> float | None:
+        """One frame pair's readings, taken at ``here`` (forward coordinate) and ``across`` (right): the wall's
+        distance with a gap in view, the rough one read without a gap (None: the distance reading, if any, is the
+        rough one too), and the wall's turn (each None when not read).  Returns the distance reading kept (None
+        when out of range)."""
+        lo, hi = READING_RANGE_M
+        if measured is not None and not lo <= measured <= hi:
+            measured = None
+        if measured is not None:
+            self.readings.append((here + measured, across))
+        rough = measured if rough is None else rough
+        if rough is not None and lo <= rough <= hi:
+            self.rough.append(here + rough)
+        if turn is not None:
+            self.turns.append(turn)
+        return measured
+
+    def add_far(self, here: float, far: float, measured: float | None) -> None:
+        """The far surface seen through the opening, ``far`` metres from ``here``: kept when beyond this pair's
+        own wall reading ``measured`` (if any) and within :data:`FAR_LIMIT_M`."""
+        if (measured is None or far > measured) and far <= FAR_LIMIT_M:
+            self.far.append(here + far)
+
+    @property
+    def turn(self) -> float | None:
+        """The wall's turn against the heading (rad), once enough readings agree on a median."""
+        return float(np.median(self.turns[-TURN_WINDOW:])) if len(self.turns) >= TURN_MIN_READINGS else None
+
+    def own(self, here: float, across: float) -> bool:
+        """Whether a look's own latest readings agree (see the module docstring); always False without a prior."""
+        return self.prior is not None and wall_readings_agree(
+            self.readings, across, self.turn, here, self.min_measurements, self.agree_m, self.agree_per_m)
+
+    def view(self, here: float, across: float) -> tuple[float | None, float | None]:
+        """(distance, ahead) from ``here`` at ``across``: the wall's distance (None before ``min_measurements``
+        readings), and the nearest it can be straight ahead (None before any bound is known)."""
+        own = self.own(here, across)
+        distance = None
+        if len(self.readings) >= self.min_measurements:
+            distance = wall_forward_at(self.readings, across, self.turn) - here
+            if self.prior is not None and not own and distance > self.prior - here + self.slack_m:
+                # a look's reading well beyond where earlier looks put the wall is not the wall (measured: by a
+                # wall's end, readings of 1.6-3.3 m for a wall 0.7 m ahead walked a vehicle into it)
+                distance = self.prior - here
+        ahead = distance
+        if ahead is None and len(self.rough) >= self.min_measurements:
+            ahead = float(np.median(self.rough[-self.min_measurements:])) - here
+        if self.prior is not None and not own:
+            ahead = self.prior - here if ahead is None else min(ahead, self.prior - here)
+        return distance, ahead
+
+    def fallback_distance(self, here: float) -> float | None:
+        """With fewer readings than ``min_measurements``, still better than nothing: their plain median."""
+        return float(np.median([forward for forward, _ in self.readings])) - here if self.readings else None
+
+    def far_distance(self, here: float) -> float | None:
+        return float(np.median(self.far)) - here if self.far else None
