@@ -263,8 +263,13 @@ def wall_forward_at(readings: list[tuple[float, float]], across_m: float, turn_r
     of sideways flight put it about 0.2 m too far, and the opening's clear radius, scaled by that distance, came
     out 0.275 m for 0.205 m; the vehicle pushed into an opening it could not pass).  Without a measured turn, or
     a negligible one, the plain median."""
+    return float(np.median(carried_along_wall(readings, across_m, turn_rad)))
+
+
+def carried_along_wall(readings: list[tuple[float, float]], across_m: float, turn_rad: float | None) -> list[float]:
+    """Each reading's forward coordinate carried along a wall turned by ``turn_rad`` to ``across_m``."""
     slope = wall_slope(turn_rad)
-    return float(np.median([forward + (across_m - across) * slope for forward, across in readings]))
+    return [forward + (across_m - across) * slope for forward, across in readings]
 
 
 def wall_readings_agree(readings: list[tuple[float, float]], across_m: float, turn_rad: float | None,
@@ -277,8 +282,7 @@ def wall_readings_agree(readings: list[tuple[float, float]], across_m: float, tu
     it, and 0.19 m within 1.8 m)."""
     if len(readings) < count:
         return False
-    slope = wall_slope(turn_rad)
-    carried = [forward + (across_m - across) * slope for forward, across in readings[-count:]]
+    carried = carried_along_wall(readings[-count:], across_m, turn_rad)
     distance = max(0.0, float(np.median(carried)) - here_m)
     return max(carried) - min(carried) <= tolerance_m + per_metre * distance
 
