@@ -93,6 +93,8 @@ class MissionConfig:
     settle_timeout_s: float = 1.5   # vehicle still braking is pitched 10°+ (measured), which blurs parallax
     estimate_wait_s: float = 0.5    # for the telemetry of a frame's moment to arrive (a slow link delays it)
     estimate_max_age_s: float = 0.04  # ... to within this (position streams at 30 Hz, attitude at 50 Hz)
+    min_altitude_m: float = 0.5  # no servo step goes lower than this above home, nor than altitude_m if that is
+                                 # lower (the random worlds' openings start 0.35 m up, their centres 1 m or more)
     takeoff_attempts: int = 3  # arm + takeoff rounds when the vehicle disarms on the ground in between
     no_gap_limit: int = 8  # servo steps without any gap ever seen before giving up
     min_wall_measurements: int = 3  # flow-based wall distances needed before they steer the push
@@ -152,6 +154,7 @@ class Mission:
         self._fresh_tracker = copy.deepcopy(self.tracker)  # each look of a search starts from it
         self._frame_base = 0      # step number of the current look's first frame (looks number on from the last)
         self._steps_before = 0    # servo steps of the looks before this one
+        self._home_z = 0.0        # home's down coordinate (NED), taken on the ground at arming
         self._wall_seen = None    # (forward, right, turn) of the wall's face as last measured (m, m, rad or None)
         # Once the wall's distance is known, the opening's clear centre is tracked where it is in the world
         # (companion.opening): a frame without a detection then steers by the vehicle's own motion instead of
@@ -175,7 +178,7 @@ class Mission:
             self.link.wait_for(lambda t: t.position is not None and t.landed is not None,
                                self.config.preflight_timeout_s, "position estimate and landed state")
             self.link.set_takeoff_altitude(self.config.altitude_m)
-            home_z = self._arm_and_take_off()
+            home_z = self._home_z = self._arm_and_take_off()
             self.link.wait_for(lambda t: t.position is not None
                                and abs(t.position[2] - (home_z - self.config.altitude_m)) < 0.1
                                and math.hypot(*t.velocity) < 0.2,
@@ -316,7 +319,9 @@ class Mission:
             self._frame_base = n + 1
             t_step = self.clock.now()
             delta = heading_to_ned(step.delta_heading, self.yaw)
-            waypoint = (waypoint[0] + delta[0], waypoint[1] + delta[1], waypoint[2] + delta[2])
+            # never lower than min_altitude_m above home (or the flight's own height, if lower), whatever the image
+            floor = self._home_z - min(self.config.min_altitude_m, self.config.altitude_m)
+            waypoint = (waypoint[0] + delta[0], waypoint[1] + delta[1], min(waypoint[2] + delta[2], floor))
             self._send(waypoint)
             arrived = self.link.wait_position(waypoint, self.config.arrival_tolerance_m,
                                               self.config.step_timeout_s, self.config.arrival_speed_mps)
@@ -398,8 +403,11 @@ class Mission:
                     # push (measured, hard world seed 46: a look whose target was a stale image position walked
                     # 2 m on and into the wall)
                     forward = min(next_step.delta_heading[0], max(0.0, ahead - cfg.hold_distance_m))
-                    next_step = dataclasses.replace(
-                        next_step, delta_heading=(forward, *next_step.delta_heading[1:]), push=False)
+                    # ... and steps across only towards a target seen in this frame: a held one re-applied its
+                    # last correction at every step (measured, hard world seed 49: held at the hold distance,
+                    # no baseline, no new sighting; 0.05 m down per step for 20 steps, to the ground)
+                    sideways = next_step.delta_heading[1:] if openings.last_accepted else (0.0, 0.0)
+                    next_step = dataclasses.replace(next_step, delta_heading=(forward, *sideways), push=False)
             else:
                 next_step = metric_step(sight.offset_m, sight.clear_radius_m, wall_distance, area_frac, k + 1, cfg,
                                         normalised_error(used, width, height), sight.clearance_here_m,

@@ -67,8 +67,10 @@ def _waypoint_delays(run_dir: Path) -> list[float]:
     setpoints = _setpoints(run_dir / "companion" / "link.tlog")
     delays = []
     for this, after in zip(decisions[:-1], decisions[1:], strict=True):
-        target = tuple(round(v, 5) for v in after["waypoint"])
-        sent = next(sp[0] * 1e-3 for sp in setpoints if sp[1:4] == target)
+        # the log rounds to 1e-5 m and MAVLink carries float32: the same waypoint within 2e-5 m (an exact match of
+        # rounded values misses one that rounds the other way)
+        sent = next(sp[0] * 1e-3 for sp in setpoints
+                    if all(abs(a - b) <= 2e-5 for a, b in zip(sp[1:4], after["waypoint"], strict=True)))
         delays.append(sent - this["frame_time_s"])
     return delays
 

@@ -391,3 +391,59 @@ def test_a_looks_own_agreeing_readings_are_the_wall_wherever_earlier_looks_allow
     assert prior - hold + 0.5 < steady <= wall - hold + 0.05
     jumping = max(p[0] for p in _look(tmp_path / "jumping", wall, prior, wrong_every=3).setpoints)
     assert jumping <= prior - hold + ServoConfig().forward_step_m
+
+
+class LowHole:
+    """A detector that sees an opening low in the frame (about 0.4 of the half-height below the centre) in its
+    first ``frames`` calls, and nothing after them (``frames`` None: in every call)."""
+
+    def __init__(self, frames: int | None = None) -> None:
+        self.frames, self.calls = frames, 0
+
+    def __call__(self, flow):
+        from companion.gap import GapDetection, _no_gap
+
+        self.calls += 1
+        h, w = flow.shape[:2]
+        if self.frames is not None and self.calls > self.frames:
+            return _no_gap((h, w), "nothing this frame", "fake")
+        mask = np.zeros((h, w), bool)
+        mask[30:40, 26:38] = True
+        centre = (31.5, 34.5)
+        return GapDetection(mask, centre, float(mask.sum()), None, None, "fake", centre, 5.0)
+
+
+def _look_by_the_image(tmp_path, detector) -> RecordingLink:
+    """A look (wall prior 2 m ahead) whose wall is never measured (zero flow), steering by the image alone."""
+    from companion.mission import Refusal
+
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)   # in the air, a look's start
+    mission = Mission(link, StillCamera(), ZeroFlow(), detector, RunLog(tmp_path, images=False),
+                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01, min_baseline_m=0.0))
+    mission.yaw = 0.0
+    with pytest.raises(Refusal):
+        mission._servo((0.0, 0.0, -1.5), (), 2.0, (0.0, 1.2))
+    return link
+
+
+def test_a_look_steers_across_only_towards_a_target_seen_in_that_frame(tmp_path):
+    """A look steering by the image alone, its target seen in the first frames only, steps down towards it while it
+    is seen and not at all once it is not: the held target's correction is not re-applied at every step (measured,
+    hard world seed 49: held at the hold distance, 0.05 m down per step for 20 steps, to the ground)."""
+    link = _look_by_the_image(tmp_path, LowHole(frames=4))
+    downs = [p[2] for p in link.setpoints]
+    assert downs[3] > -1.5 + 0.02                  # it stepped down while the opening was seen ...
+    assert downs[-1] == pytest.approx(downs[5])    # ... and not once it was gone
+    assert len(downs) >= 20
+
+
+def test_no_servo_step_goes_below_the_minimum_altitude(tmp_path):
+    """MissionConfig.min_altitude_m: an opening seen low in every frame draws each step down, and the steps stop
+    at the minimum height above home (home is at 0 here) instead of reaching the ground."""
+    link = _look_by_the_image(tmp_path, LowHole())
+    downs = [p[2] for p in link.setpoints]
+    assert max(downs) == pytest.approx(-MissionConfig().min_altitude_m)
+    assert downs.count(max(downs)) >= 3             # it reached the floor and stayed on it
+
+
