@@ -314,13 +314,13 @@ class Mission:
         openings = OpeningTracker(cfg, self.openings, self.tracker, avoid, reach)
         focal = float(self.camera.K[0, 0])
         ever_seen = False
+        # no step lower than min_altitude_m above home (or the flight's own height, if lower), whatever the image
+        floor = self._home_z - min(self.config.min_altitude_m, self.config.altitude_m)
         for k in range(cfg.step_budget):
             n = base + k + 1      # the step's number in the flight's logs
             self._frame_base = n + 1
             t_step = self.clock.now()
             delta = heading_to_ned(step.delta_heading, self.yaw)
-            # never lower than min_altitude_m above home (or the flight's own height, if lower), whatever the image
-            floor = self._home_z - min(self.config.min_altitude_m, self.config.altitude_m)
             waypoint = (waypoint[0] + delta[0], waypoint[1] + delta[1], min(waypoint[2] + delta[2], floor))
             self._send(waypoint)
             arrived = self.link.wait_position(waypoint, self.config.arrival_tolerance_m,

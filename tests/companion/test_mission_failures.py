@@ -312,22 +312,30 @@ def test_a_look_is_bounded_by_the_nearest_wall_any_earlier_look_allows():
         3.0 - 0.5 * math.tan(turn))
 
 
+def _look_by_the_image(tmp_path, detector, match: str | None = None) -> RecordingLink:
+    """A look (wall prior 2 m ahead, heading north) whose wall is never measured (zero flow: no parallax), steering
+    by the image alone, until it refuses (with ``match`` in its reason, when given)."""
+    from companion.mission import Refusal
+
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)   # in the air, a look's start
+    mission = Mission(link, StillCamera(), ZeroFlow(), detector, RunLog(tmp_path, images=False),
+                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01, min_baseline_m=0.0))
+    mission.yaw = 0.0                                  # heading north: forward is the north coordinate
+    with pytest.raises(Refusal, match=match):
+        mission._servo((0.0, 0.0, -1.5), (), 2.0, (0.0, 1.2))
+    return link
+
+
 def test_a_look_steering_by_the_image_alone_keeps_off_the_wall_earlier_looks_placed(tmp_path):
     """A look (``wall_prior`` from earlier looks) whose detector shows an "opening" but whose wall is never measured
     (zero flow: no parallax) steers by the image alone: it goes no nearer than the hold distance to the prior, and
     at the end of its step budget it refuses instead of pushing what it never placed (measured, hard world seed
     46: such a look walked 2 m on, into the wall)."""
-    from companion.mission import Refusal
     from companion.servo import ServoConfig
 
-    link = RecordingLink()
-    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)   # in the air, servoing
-    mission = Mission(link, StillCamera(), ZeroFlow(), HalfTheFrame(), RunLog(tmp_path, images=False),
-                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01, min_baseline_m=0.0))
-    mission.yaw = 0.0                                  # heading north: forward is the north coordinate
+    link = _look_by_the_image(tmp_path, HalfTheFrame(), match="no opening placed within 30 steps")
     prior = 2.0                                        # the nearest the wall's face can be, 2 m ahead
-    with pytest.raises(Refusal, match="no opening placed within 30 steps"):
-        mission._servo((0.0, 0.0, -1.5), (), prior, (0.0, 1.2))
     hold = ServoConfig().hold_distance_m
     assert max(p[0] for p in link.setpoints) <= prior - hold + 1e-9
     assert max(p[0] for p in link.setpoints) > prior - hold - 0.2    # it did walk up to there
@@ -413,20 +421,6 @@ class LowHole:
         return GapDetection(mask, centre, float(mask.sum()), None, None, "fake", centre, 5.0)
 
 
-def _look_by_the_image(tmp_path, detector) -> RecordingLink:
-    """A look (wall prior 2 m ahead) whose wall is never measured (zero flow), steering by the image alone."""
-    from companion.mission import Refusal
-
-    link = RecordingLink()
-    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)   # in the air, a look's start
-    mission = Mission(link, StillCamera(), ZeroFlow(), detector, RunLog(tmp_path, images=False),
-                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01, min_baseline_m=0.0))
-    mission.yaw = 0.0
-    with pytest.raises(Refusal):
-        mission._servo((0.0, 0.0, -1.5), (), 2.0, (0.0, 1.2))
-    return link
-
-
 def test_a_look_steers_across_only_towards_a_target_seen_in_that_frame(tmp_path):
     """A look steering by the image alone, its target seen in the first frames only, steps down towards it while it
     is seen and not at all once it is not: the held target's correction is not re-applied at every step (measured,
@@ -445,5 +439,3 @@ def test_no_servo_step_goes_below_the_minimum_altitude(tmp_path):
     downs = [p[2] for p in link.setpoints]
     assert max(downs) == pytest.approx(-MissionConfig().min_altitude_m)
     assert downs.count(max(downs)) >= 3             # it reached the floor and stayed on it
-
-
