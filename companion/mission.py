@@ -351,9 +351,9 @@ class Mission:
             here, place = self._forward(position), self._across(position)   # place: (right, down) now
             across = place[0]
             measured = wall.add(
-                here, across, wall_distance_from_flow(flow, gaps, moved) if found else None,
+                here, across, wall_distance_from_flow(flow, gaps, moved, focal_px=focal) if found else None,
                 # without a gap the wall is still measured, for one purpose only: not to walk into it blind
-                None if found or still else wall_distance_from_flow(flow, None, moved),
+                None if found or still else wall_distance_from_flow(flow, None, moved, focal_px=focal),
                 wall_yaw_from_flow(flow, gaps, focal) if found and moved >= 0.08 else None)
             wall_yaw = wall.turn
             # A distance enters the push decision only once three measurements agree on a median; a look's is

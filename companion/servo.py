@@ -227,15 +227,25 @@ def far_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray, translation_m
 
 
 def wall_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, translation_m: float,
-                            motion_direction_cam: tuple[float, float, float] | None = None) -> float | None:
-    """Metric distance to the nearer surface (the wall) from flow and the known length of the camera's
-    translation between the frames: for a translating camera the flow is (|T|/Z)·g, so Z = |T|/ρ with ρ
-    the relative inverse depth. Uses the median over measurable pixels outside the gap."""
+                            motion_direction_cam: tuple[float, float, float] | None = None,
+                            focal_px: float | None = None) -> float | None:
+    """Metric distance to the nearer surface (the wall) straight ahead, from flow and the known length of the
+    camera's translation between the frames: for a translating camera the flow is (|T|/Z)·g, so Z = |T|/ρ with ρ
+    the relative inverse depth.  With ``focal_px``, ρ is that of the plane fitted through the wall's inverse
+    depth (:func:`_wall_plane`) at the image's centre; without it, or with too little wall for a plane,
+    the 60th percentile of ρ over measurable pixels outside the gap (it leans toward the wall and away from far
+    pixels a gap mask missed, but also toward a turned wall's near side: measured on 201 close frame pairs of
+    hard-world flights, seeds 60 and 61, the percentile read 0.966 of the true distance at the median, 0.961
+    with the wall turned 10-21°; the plane 0.996, and 0.993-1.002 whatever the turn)."""
     from companion.gap import CameraMotion, inverse_depth_from_flow
 
     if translation_m <= 1e-3:
         return None
     rho, valid = inverse_depth_from_flow(flow, CameraMotion(translation=motion_direction_cam))
+    if focal_px is not None:
+        plane = _wall_plane(rho, valid, gap_mask, focal_px)
+        if plane is not None:
+            return translation_m / plane[2]
     keep = valid & np.isfinite(rho) & (rho > 0)
     if gap_mask is not None:
         keep &= ~gap_mask.astype(bool)
@@ -245,8 +255,6 @@ def wall_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, trans
     keep &= core
     if keep.sum() < 0.02 * h * w:
         return None
-    # The wall is the nearest large surface: the 60th percentile of inverse depth in the core leans toward
-    # it and away from far pixels the gap mask missed.
     rho_wall = float(np.percentile(rho[keep], 60))
     return translation_m / rho_wall if rho_wall > 0 else None
 
@@ -295,12 +303,20 @@ def wall_slope(turn_rad: float | None) -> float:
 
 def wall_yaw_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, focal_px: float) -> float | None:
     """How far the wall is turned against the camera's axis (radians, positive: its right side further away),
-    from the same inverse depth: on a plane, ρ is linear in the normalised image coordinates, ρ ∝ n·(x/f, y/f,
-    1), so a least-squares plane through the wall's ρ (outside the gaps, away from the frame's edges and from
-    far pixels a mask missed) gives its normal's direction.  None when too little wall is measurable."""
+    from the plane of its inverse depth (:func:`_wall_plane`): its normal's direction.  None when too
+    little wall is measurable."""
     from companion.gap import inverse_depth_from_flow
 
-    rho, valid = inverse_depth_from_flow(flow)
+    plane = _wall_plane(*inverse_depth_from_flow(flow), gap_mask, focal_px)
+    return None if plane is None else float(math.atan2(-plane[0], plane[2]))
+
+
+def _wall_plane(rho: np.ndarray, valid: np.ndarray, gap_mask: np.ndarray | None,
+                focal_px: float) -> np.ndarray | None:
+    """The wall's plane in inverse depth: on a plane, ρ is linear in the normalised image coordinates, ρ = a·x/f
+    + b·y/f + c, with (a, b, c) ∝ its normal; a least-squares fit through the wall's ρ (outside the gaps, away
+    from the frame's edges and from far pixels a mask missed).  (a, b, c), c > 0 (ρ straight ahead); None when
+    too little wall is measurable or the fit puts the plane behind the camera."""
     keep = valid & np.isfinite(rho) & (rho > 0)
     if gap_mask is not None:
         keep &= ~gap_mask.astype(bool)
@@ -316,6 +332,4 @@ def wall_yaw_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, focal_px: 
     ys, xs = np.nonzero(keep)
     a = np.stack([(xs - (w - 1) / 2) / focal_px, (ys - (h - 1) / 2) / focal_px, np.ones(len(xs))], axis=1)
     coef, *_ = np.linalg.lstsq(a, rho[keep], rcond=None)
-    if coef[2] <= 0:
-        return None
-    return float(math.atan2(-coef[0], coef[2]))
+    return coef if coef[2] > 0 else None

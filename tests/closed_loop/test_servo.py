@@ -465,6 +465,31 @@ def test_wall_distance_uses_measurable_wall_only():
     assert wall_distance_from_flow(_flow_of(np.full((240, 320), 0.1)), mask, 0.2) is None
 
 
+def test_a_turned_walls_distance_straight_ahead_is_read_from_its_plane():
+    from companion.servo import wall_distance_from_flow
+
+    h, w = 240, 320
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    xn = (xs - (w - 1) / 2) / F
+    for deg in (0.0, 15.0, -20.0):
+        t = math.radians(deg)
+        # a wall 2 m ahead turned by t (0.2 m step: ρ 0.1 straight ahead), the far surface 5 m away in the gap
+        rho = 0.1 * (math.cos(t) - math.sin(t) * xn) / math.cos(t)
+        mask = np.zeros((h, w), bool)
+        mask[90:150, 130:190] = True
+        rho[mask] = 0.04
+        assert wall_distance_from_flow(_flow_of(rho), mask, 0.2, focal_px=F) == pytest.approx(2.0, rel=1e-3)
+        percentile = wall_distance_from_flow(_flow_of(rho), mask, 0.2)     # without the focal length
+        if deg:
+            assert percentile < 1.96              # the 60th percentile leans toward the turned wall's near side
+    # too little wall for a plane (a mask over all but 2.5 % of the image): the percentile's reading
+    mask = np.ones((h, w), bool)
+    mask[100:124, 80:160] = False
+    flat = _flow_of(np.full((h, w), 0.1))
+    assert wall_distance_from_flow(flat, mask, 0.2, focal_px=F) == pytest.approx(2.0, rel=1e-4)
+    assert wall_distance_from_flow(flat, None, 1e-3, focal_px=F) is None
+
+
 def test_wall_yaw_fits_the_wall_plane_only():
     from companion.servo import wall_yaw_from_flow
 
