@@ -38,8 +38,8 @@ from companion.servo import (
     push_waypoints,
     servo_step,
     wall_distance_from_flow,
+    wall_from_flow,
     wall_slope,
-    wall_yaw_from_flow,
 )
 from companion.storyboard import Storyboard, StoryRow, step_text
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
@@ -350,11 +350,12 @@ class Mission:
             gaps = np.logical_or.reduce([d.mask for d in found]) if found else None
             here, place = self._forward(position), self._across(position)   # place: (right, down) now
             across = place[0]
+            reading, turn = wall_from_flow(flow, gaps, moved, focal) if found else (None, None)
             measured = wall.add(
-                here, across, wall_distance_from_flow(flow, gaps, moved, focal_px=focal) if found else None,
+                here, across, reading,
                 # without a gap the wall is still measured, for one purpose only: not to walk into it blind
                 None if found or still else wall_distance_from_flow(flow, None, moved, focal_px=focal),
-                wall_yaw_from_flow(flow, gaps, focal) if found and moved >= 0.08 else None)
+                turn if moved >= 0.08 else None)
             wall_yaw = wall.turn
             # A distance enters the push decision only once three measurements agree on a median; a look's is
             # bounded by where earlier looks put the wall, unless its own readings agree (measured, hard world seeds

@@ -242,10 +242,28 @@ def wall_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, trans
     if translation_m <= 1e-3:
         return None
     rho, valid = inverse_depth_from_flow(flow, CameraMotion(translation=motion_direction_cam))
-    if focal_px is not None:
-        plane = _wall_plane(rho, valid, gap_mask, focal_px)
-        if plane is not None:
-            return translation_m / plane[2]
+    plane = _wall_plane(rho, valid, gap_mask, focal_px) if focal_px is not None else None
+    return _distance(rho, valid, gap_mask, translation_m, plane)
+
+
+def wall_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, translation_m: float,
+                   focal_px: float) -> tuple[float | None, float | None]:
+    """(:func:`wall_distance_from_flow`, :func:`wall_yaw_from_flow`) of one frame pair, from one inverse depth and
+    one plane fit (the two read the same plane)."""
+    from companion.gap import inverse_depth_from_flow
+
+    rho, valid = inverse_depth_from_flow(flow)
+    plane = _wall_plane(rho, valid, gap_mask, focal_px)
+    distance = _distance(rho, valid, gap_mask, translation_m, plane) if translation_m > 1e-3 else None
+    return distance, _yaw(plane)
+
+
+def _distance(rho: np.ndarray, valid: np.ndarray, gap_mask: np.ndarray | None, translation_m: float,
+              plane: np.ndarray | None) -> float | None:
+    """The wall's distance straight ahead: from ``plane`` (:func:`_wall_plane`) when there is one, else from the
+    60th percentile of ρ (see :func:`wall_distance_from_flow`)."""
+    if plane is not None:
+        return translation_m / plane[2]
     keep = valid & np.isfinite(rho) & (rho > 0)
     if gap_mask is not None:
         keep &= ~gap_mask.astype(bool)
@@ -307,7 +325,11 @@ def wall_yaw_from_flow(flow: np.ndarray, gap_mask: np.ndarray | None, focal_px: 
     little wall is measurable."""
     from companion.gap import inverse_depth_from_flow
 
-    plane = _wall_plane(*inverse_depth_from_flow(flow), gap_mask, focal_px)
+    return _yaw(_wall_plane(*inverse_depth_from_flow(flow), gap_mask, focal_px))
+
+
+def _yaw(plane: np.ndarray | None) -> float | None:
+    """The wall's turn from its plane (:func:`_wall_plane`), None without one."""
     return None if plane is None else float(math.atan2(-plane[0], plane[2]))
 
 

@@ -490,6 +490,25 @@ def test_a_turned_walls_distance_straight_ahead_is_read_from_its_plane():
     assert wall_distance_from_flow(flat, None, 1e-3, focal_px=F) is None
 
 
+def test_the_walls_distance_and_turn_read_together_are_those_read_apart():
+    from companion.servo import wall_distance_from_flow, wall_from_flow, wall_yaw_from_flow
+
+    h, w = 240, 320
+    xn = (np.mgrid[0:h, 0:w][1].astype(np.float64) - (w - 1) / 2) / F
+    t = math.radians(12.0)
+    rho = 0.1 * (math.cos(t) - math.sin(t) * xn) / math.cos(t)
+    mask = np.zeros((h, w), bool)
+    mask[90:150, 130:190] = True
+    rho[mask] = 0.04
+    flow = _flow_of(rho)
+    distance, turn = wall_from_flow(flow, mask, 0.2, F)
+    assert distance == wall_distance_from_flow(flow, mask, 0.2, focal_px=F) == pytest.approx(2.0, rel=1e-3)
+    assert turn == wall_yaw_from_flow(flow, mask, F) == pytest.approx(t, abs=0.01)
+    assert wall_from_flow(flow, mask, 1e-3, F) == (None, turn)       # no step, no distance; the turn still
+    everywhere = np.ones((h, w), bool)
+    assert wall_from_flow(flow, everywhere, 0.2, F) == (None, None)  # no wall at all
+
+
 def test_wall_yaw_fits_the_wall_plane_only():
     from companion.servo import wall_yaw_from_flow
 
