@@ -197,6 +197,21 @@ class ParallaxGapConfig:
                                       # 1.0, 2.8 px over at the 90th percentile); None: the mask as flow shows it
     every_step: bool = False          # with no hole beyond the sharpest depth step, look beyond the next
                                       # sharpest (seen from afar, the floor's step can be the sharpest)
+    # Where the image has texture (textured_pixels): flow elsewhere (the empty space beyond a wall's end, a plain
+    # surface) is filled in from the region's edges and says nothing of its depth.
+    texture_min_gradient: float = 20.0  # grey Sobel magnitude (of 255) of a textured pixel ...
+    texture_reach_px: int = 4           # ... and the pixels this near one (a plain patch of a textured wall
+                                        # is a few pixels across; its flow is the wall's)
+
+
+def textured_pixels(rgb: np.ndarray, config: ParallaxGapConfig = ParallaxGapConfig()) -> np.ndarray:
+    """H×W mask of the pixels whose flow can say something of their depth: within ``texture_reach_px`` of one
+    whose grey gradient (Sobel magnitude) is at least ``texture_min_gradient``."""
+    grey = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2GRAY).astype(np.float32)
+    gradient = np.hypot(cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3), cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3))
+    reach = 2 * config.texture_reach_px + 1
+    strong = (gradient >= config.texture_min_gradient).astype(np.uint8)
+    return cv2.dilate(strong, np.ones((reach, reach), np.uint8)).astype(bool)
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,15 @@ def body_to_world_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarra
                      [-sp, cp * sr, cp * cr]])
 
 
+def translation_in_camera(position_1, position_2, euler_1,
+                          camera_from_body: np.ndarray = CAMERA_FROM_BODY) -> tuple[float, float, float]:
+    """The camera's move from ``position_1`` to ``position_2`` (NED, metres) in the axes of the camera at
+    the first (x right, y down, z forward), given the body's ZYX Euler attitude there."""
+    move = np.subtract(position_2, position_1, dtype=np.float64)
+    t = camera_from_body @ body_to_world_from_euler(*euler_1).T @ move
+    return float(t[0]), float(t[1]), float(t[2])
+
+
 def rotational_flow(K: np.ndarray, body_to_world_1: np.ndarray, body_to_world_2: np.ndarray, height: int,
                     width: int, camera_from_body: np.ndarray = CAMERA_FROM_BODY) -> np.ndarray:
     """H×W×2 flow that the rotation from attitude 1 to attitude 2 alone would produce (pixel centres)."""

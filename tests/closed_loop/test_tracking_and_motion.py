@@ -145,3 +145,20 @@ def test_a_ray_behind_the_other_camera_keeps_the_pixel():
     # pitched 120° nose up the camera's axis points backwards and up: behind the level camera, and the other way
     assert level_pixel((200.0, 50.0), KM, 0.0, math.radians(120)) == (200.0, 50.0)
     assert tilted_pixel((200.0, 50.0), KM, 0.0, math.radians(120)) == (200.0, 50.0)
+
+
+@pytest.mark.parametrize("yaw_deg, move_ned, expected", [
+    (0.0, (0.2, 0.0, 0.0), (0.0, 0.0, 0.2)),       # heading north, moving north: along the optical axis
+    (90.0, (0.0, 0.2, 0.0), (0.0, 0.0, 0.2)),      # heading east, moving east: the same
+    (0.0, (0.0, 0.1, 0.0), (0.1, 0.0, 0.0)),       # heading north, moving east: to the camera's right
+    (90.0, (0.0, 0.0, 0.1), (0.0, 0.1, 0.0)),      # moving down: the camera's y (down) whatever the heading
+])
+def test_a_move_in_ned_is_expressed_in_the_first_cameras_axes(yaw_deg, move_ned, expected):
+    from companion.motion import translation_in_camera
+
+    start = (1.0, -2.0, -1.5)
+    end = tuple(a + b for a, b in zip(start, move_ned, strict=True))
+    assert translation_in_camera(start, end, (0.0, 0.0, math.radians(yaw_deg))) == pytest.approx(expected, abs=1e-12)
+    # pitched nose-down by 10°, a level move north has a component up in the camera (y negative)
+    pitched = translation_in_camera((0, 0, 0), (1.0, 0, 0), (0.0, math.radians(-10.0), 0.0))
+    assert pitched[1] == pytest.approx(-math.sin(math.radians(10.0))) and pitched[2] > 0.98

@@ -190,3 +190,21 @@ def test_a_detection_carries_its_clear_circle():
     det = detect_gap_parallax(flow)
     assert det.found and det.clear_radius_px == pytest.approx(45.0, abs=4.0)
     assert det.clear_centre == pytest.approx((160.0, 105.0), abs=4.0)
+
+
+def test_textured_pixels_are_those_near_an_edge_of_the_image():
+    from companion.gap import textured_pixels
+
+    cfg = ParallaxGapConfig()
+    rng = np.random.default_rng(3)
+    wall = rng.integers(0, 256, (H, W, 1), dtype=np.uint8).repeat(3, axis=2)    # texture everywhere ...
+    wall[:, 200:] = 0                                                           # ... but the empty space
+    wall[100:104, 50:54] = 128                                                  # ... and a plain patch
+    textured = textured_pixels(wall, cfg)
+    assert textured[:, :200].all()                              # the patch too: its flow is the wall's
+    assert not textured[:, 200 + cfg.texture_reach_px + 2:].any()
+    assert textured[:, 200 + cfg.texture_reach_px - 1].all()    # the empty space's edge still counts
+    assert not textured_pixels(np.full((H, W, 3), 90, np.uint8), cfg).any()
+    # a faint gradient (under the threshold) is not texture
+    ramp = np.tile(np.linspace(0, 60, W, dtype=np.float32), (H, 1)).astype(np.uint8)[..., None].repeat(3, axis=2)
+    assert not textured_pixels(ramp, cfg).any()

@@ -90,11 +90,14 @@ class RecordingLink(ScriptedLink):
 
 
 class StillCamera:
+    """The same frame every time: a textured wall (4 px checks: the wall is read only where there is texture)."""
+
     width, height = 64, 48
     K = np.array([[40.0, 0, 32], [0, 40.0, 24], [0, 0, 1]])
+    WALL = np.repeat(((np.indices((48, 64)) // 4).sum(axis=0) % 2 * 200).astype(np.uint8)[..., None], 3, axis=2)
 
     def capture(self) -> Frame:
-        return Frame(np.zeros((48, 64, 3), np.uint8), (0.0, 0.0, -1.5), (1.0, 0.0, 0.0, 0.0), 0.0, 0.0)
+        return Frame(self.WALL.copy(), (0.0, 0.0, -1.5), (1.0, 0.0, 0.0, 0.0), 0.0, 0.0)
 
     def close(self) -> None:
         pass
@@ -439,3 +442,39 @@ def test_no_servo_step_goes_below_the_minimum_altitude(tmp_path):
     downs = [p[2] for p in link.setpoints]
     assert max(downs) == pytest.approx(-MissionConfig().min_altitude_m)
     assert downs.count(max(downs)) >= 3             # it reached the floor and stayed on it
+
+
+class WallPatch:
+    """A detector that takes the left half of the frame for an opening, whatever the flow shows there."""
+
+    def __call__(self, flow):
+        from companion.gap import GapDetection
+
+        h, w = flow.shape[:2]
+        mask = np.zeros((h, w), bool)
+        mask[4:h - 4, 2:w // 2] = True
+        centre = (w / 4, h / 2)
+        return GapDetection(mask, centre, float(mask.sum()), None, None, "fake", centre, 10.0)
+
+
+def test_an_opening_whose_depth_is_the_walls_is_set_aside_and_never_pushed_through(tmp_path):
+    """OpeningConfig.max_depth_ratio: a "gap" whose flow is the wall's own is a patch of the wall (measured, hard
+    world seed 64: a turned wall's farther half, 42 % of the frame, pushed at once from 2.2 m into the wall)."""
+    import json
+
+    from companion.mission import Refusal
+    from companion.servo import ServoConfig
+
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)
+    mission = Mission(link, StillCamera(), WallFlow(link, 3.0), WallPatch(), RunLog(tmp_path, images=False),
+                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01))
+    mission.yaw = 0.0
+    with pytest.raises(Refusal, match="no opening found"):
+        mission._servo((0.0, 0.0, -1.5))
+    mission.runlog.close()
+    decisions = [json.loads(line) for line in open(tmp_path / "decisions.jsonl")]
+    patches = [d["wall_patches"] for d in decisions if d["wall_patches"]]
+    assert len(patches) >= len(decisions) - 1 and all(r == pytest.approx(1.0, abs=0.05) for p in patches for r in p)
+    assert all(d["openings"] == 0 and not d["push"] for d in decisions)
+    assert max(p[0] for p in link.setpoints) <= 3.0 - ServoConfig().hold_distance_m + 1e-9

@@ -195,3 +195,23 @@ def test_the_clear_radius_steered_by_holds_for_two_estimates_in_a_row():
     assert unseen == pytest.approx(first)
     agreed = tracker.observe([cand(large)], (0.0, 0.0), 2.0, F, W, H).clear_radius_m
     assert agreed > first + 0.2
+
+
+def test_only_sightings_with_the_wall_near_count_as_close_ones():
+    """A push on the tracked place, unseen in its last frame, needs a sighting from near the wall (measured, hard
+    world seed 60: a blob on the wall, tracked from 2-4 m and not seen nearer, was pushed on and hit)."""
+    cfg = OpeningTracker().config
+    wide = rect(100, 60, 220, 180)
+    tracker = OpeningTracker()
+    for _ in range(2):
+        tracker.observe([cand(wide)], (0.0, 0.0), None, F, W, H)
+    far = [tracker.observe([cand(wide)], (0.0, 0.0), d, F, W, H) for d in (3.0, 2.6, 2.2, cfg.decide_within_m + 0.01)]
+    assert [s.sightings for s in far] == [1, 2, 3, 4] and all(s.close_sightings == 0 for s in far)
+    unseen = tracker.observe([], (0.0, 0.0), 1.4, F, W, H)
+    assert unseen.sightings == 4 and unseen.close_sightings == 0
+    near = tracker.observe([cand(wide)], (0.0, 0.0), cfg.decide_within_m, F, W, H)
+    assert near.sightings == 5 and near.close_sightings == 1
+    # lost and another taken: its sightings start again
+    other = rect(10, 10, 60, 60)
+    lost = [tracker.observe([cand(other)], (0.0, 0.0), 1.2, F, W, H) for _ in range(4)]
+    assert lost[-1].sightings < near.sightings and lost[-1].close_sightings == lost[-1].sightings
