@@ -348,7 +348,7 @@ class Mission:
             candidates = candidates_in(top, self.camera.K, prev_attitude)
             # The wall is read where the first frame has texture, along the move the autopilot's estimates say
             # (the flow's own focus of expansion is pulled off by the empty space beyond a wall's end: measured,
-            # hard world seed 60, readings 18-28 % long there, and a vehicle walked into the wall)
+            # hard world seed 60, readings 5-28 % long there, and a vehicle walked into the wall)
             direction = translation_in_camera(prev_position, position, prev_attitude)
             textured = textured_pixels(prev.rgb) if not still else None
             candidates, wall_patches = self._behind_wall(candidates, flow, focal, direction, textured)
@@ -494,8 +494,10 @@ class Mission:
         kept = [c for c, r in zip(candidates, ratios, strict=True) if r is None or r <= limit]
         patches = [round(r, 3) for r in ratios if r is not None and r > limit]
         if patches:
-            log.info("set aside %d of %d openings as patches of the wall (inverse depth %s of the wall's there)",
-                     len(patches), len(candidates), ", ".join(f"{r:.2f}" for r in patches))
+            note = (f"set aside {len(patches)} of {len(candidates)} openings as patches of the wall (inverse depth "
+                    f"{', '.join(f'{r:.2f}' for r in patches)} of the wall's there)")
+            log.info("%s", note)
+            self._event(note)
         return kept, patches
 
     def _send(self, waypoint) -> None:

@@ -360,7 +360,9 @@ def test_metric_step_thresholds_are_inclusive():
     assert metric_step((0.0, 0.0), 0.5, 1.0, 0.5, 5, cfg, sightings=cfg.roomy_sightings,
                        close_sightings=cfg.roomy_close_sightings).push
     # roomy needs sightings, and close ones; the defaults are none
-    assert not metric_step((0.0, 0.0), 0.5, 1.0, 0.5, 5, dataclasses.replace(cfg, roomy_sightings=1)).push
+    assert not metric_step((0.0, 0.0), 0.5, 1.0, 0.5, 5, dataclasses.replace(cfg, roomy_sightings=1),
+                           close_sightings=1).push
+    assert not metric_step((0.0, 0.0), 0.5, 1.0, 0.5, 5, cfg, sightings=cfg.roomy_sightings).push
     assert not metric_step((0.0, 0.0), 0.5, 1.0, 0.5, 5, cfg, sightings=cfg.roomy_sightings,
                            close_sightings=cfg.roomy_close_sightings - 1).push
 
@@ -565,6 +567,57 @@ def test_what_is_seen_through_an_opening_lies_behind_the_walls_plane_and_a_patch
     # too little wall for a plane: no judgement
     everything = np.ones((h, w), bool)
     assert depth_against_wall(_flow_of(rho, move), [everything, opening], F, move) == [None, None]
+
+
+def test_a_walls_depth_ratio_is_read_exactly_along_the_known_move_on_a_turned_and_pitched_wall():
+    """The ratio's parts pinned down: the wall's plane in both image axes, the move as given (not the flow's own
+    estimate, pulled off by an empty region filled in from its edge), only textured pixels in the fit, and a mask
+    with too little flow skipped without ending the list (10 measurable pixels are enough, 9 are not)."""
+    from companion.servo import depth_against_wall
+
+    h, w = 240, 320
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    xn, yn = (xs - (w - 1) / 2) / F, (ys - (h - 1) / 2) / F
+    yaw, pitch = math.radians(12.0), math.radians(10.0)
+    n = (-math.sin(yaw) * math.cos(pitch), -math.sin(pitch), math.cos(yaw) * math.cos(pitch))
+    wall = 0.1 * (n[0] * xn + n[1] * yn + n[2])                   # 2 m ahead, a 0.2 m move
+    rho = wall.copy()
+    opening = np.zeros((h, w), bool)
+    opening[40:90, 40:110] = True                                  # up and to the left: both slopes count
+    rho[opening] *= 0.5                                            # what is seen through it, twice as far
+    patch = np.zeros((h, w), bool)
+    patch[150:175, 150:200] = True                                 # the wall itself
+    ten, nine = np.zeros((h, w), bool), np.zeros((h, w), bool)
+    ten[20:22, 150:155] = True
+    nine[20:21, 170:179] = True
+    move = (0.35 / math.hypot(0.35, 1.0), 0.0, 1.0 / math.hypot(0.35, 1.0))
+    flow = _flow_of(rho, move)
+    flow[:, 230:] = flow[:, 229:230]                               # the empty space beyond the wall's end
+    empty = np.zeros((h, w), bool)
+    empty[:, 230:] = True
+    got = depth_against_wall(flow, [nine, opening, ten, patch], F, move, ~empty)
+    assert got[0] is None
+    assert got[1] == pytest.approx(0.5, abs=2e-4) and got[3] == pytest.approx(1.0, abs=2e-4)
+    assert got[2] == pytest.approx(1.0, abs=2e-4)
+    # the flow's own focus of expansion, or the empty pixels in the fit: the wall's patch 0.9-3 % off
+    assert abs(depth_against_wall(flow, [patch], F, None, ~empty)[0] - 1.0) > 0.005
+    assert abs(depth_against_wall(flow, [patch], F, move, None)[0] - 1.0) > 0.005
+    assert depth_against_wall(flow, [], F, move, ~empty) == []
+
+
+def test_the_wall_is_read_without_the_gaps_and_the_untextured_pixels_alike():
+    from companion.servo import wall_distance_from_flow
+
+    h, w = 240, 320
+    rho = np.full((h, w), 0.1)
+    gap = np.zeros((h, w), bool)
+    gap[40:170, 40:200] = True                                     # far more than the fit's trimmed fifth
+    rho[gap] = 0.04
+    textured = np.ones((h, w), bool)
+    textured[:, 300:] = False
+    flow = _flow_of(rho)
+    assert wall_distance_from_flow(flow, gap, 0.2, focal_px=F, textured=textured) == pytest.approx(2.0, rel=1e-6)
+    assert wall_distance_from_flow(flow, None, 0.2, focal_px=F, textured=textured) > 2.3    # the gap read too
 
 
 def test_wall_yaw_fits_the_wall_plane_only():
