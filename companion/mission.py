@@ -31,7 +31,6 @@ from companion.perception import perceive
 from companion.runlog import RunLog
 from companion.servo import (
     ServoConfig,
-    depth_against_wall,
     far_distance_from_flow,
     heading_to_ned,
     metric_step,
@@ -39,8 +38,8 @@ from companion.servo import (
     push_length,
     push_waypoints,
     servo_step,
+    wall_and_openings,
     wall_distance_from_flow,
-    wall_from_flow,
     wall_slope,
 )
 from companion.storyboard import Storyboard, StoryRow, step_text
@@ -351,14 +350,24 @@ class Mission:
             # hard world seed 60, readings 5-28 % long there, and a vehicle walked into the wall)
             direction = translation_in_camera(prev_position, position, prev_attitude)
             textured = textured_pixels(prev.rgb) if not still else None
-            candidates, wall_patches = self._behind_wall(candidates, flow, focal, direction, textured)
-            found = [c.detection for c in candidates]
-            # Only with a detected gap: its mask (every opening's) keeps the far pixels out of the wall's depth
+            # A detection whose depth is the wall's is a patch of it, not an opening (OpeningConfig.max_depth_ratio:
+            # measured, hard world seed 64, a sideways step past a turned wall showed its farther half as a "gap" 42 %
+            # of the frame, pushed at once from 2.2 m into the wall; on seed 60, blobs on a wall followed to it).
+            # Only with a detected gap is the wall read: the openings' masks keep the far pixels out of its depth
             # statistic (measured: without one, readings of 0.7–0.9 m for a wall 2.8 m away pushed far too early).
-            gaps = np.logical_or.reduce([d.mask for d in found]) if found else None
+            kept, patches, reading, turn = wall_and_openings(
+                flow, [c.detection.mask for c in candidates], moved, focal, self.openings.max_depth_ratio,
+                direction, textured)
+            candidates = [candidates[i] for i in kept]
+            found = [c.detection for c in candidates]
+            wall_patches = [round(r, 3) for r in patches]
+            if patches:
+                note = (f"set aside {len(patches)} of {len(kept) + len(patches)} openings as patches of the wall "
+                        f"(inverse depth {', '.join(f'{r:.2f}' for r in patches)} of the wall's there)")
+                log.info("%s", note)
+                self._event(note)
             here, place = self._forward(position), self._across(position)   # place: (right, down) now
             across = place[0]
-            reading, turn = wall_from_flow(flow, gaps, moved, focal, direction, textured) if found else (None, None)
             measured = wall.add(
                 here, across, reading,
                 # without a gap the wall is still measured, for one purpose only: not to walk into it blind
@@ -481,24 +490,6 @@ class Mission:
         # distances were all measured from there (measured, hard world seed 44: started from the waypoint
         # 0.04 m aside, a push through a polygon 0.26 m clear touched its edge).
         return tuple(prev_position), step.delta_heading[1:], wall_distance
-
-    def _behind_wall(self, candidates, flow, focal, direction, textured):
-        """The candidates whose flow puts them behind the wall (``OpeningConfig.max_depth_ratio``), and the
-        depth ratios of those set aside: a patch of the wall the detector took for an opening (measured, hard world
-        seed 64: a sideways step past a turned wall showed its farther half as a "gap" 42 % of the frame, pushed at
-        once from 2.2 m into the wall; on seed 60, blobs on a wall followed to it)."""
-        if not candidates or textured is None:
-            return candidates, []
-        ratios = depth_against_wall(flow, [c.detection.mask for c in candidates], focal, direction, textured)
-        limit = self.openings.max_depth_ratio
-        kept = [c for c, r in zip(candidates, ratios, strict=True) if r is None or r <= limit]
-        patches = [round(r, 3) for r in ratios if r is not None and r > limit]
-        if patches:
-            note = (f"set aside {len(patches)} of {len(candidates)} openings as patches of the wall (inverse depth "
-                    f"{', '.join(f'{r:.2f}' for r in patches)} of the wall's there)")
-            log.info("%s", note)
-            self._event(note)
-        return kept, patches
 
     def _send(self, waypoint) -> None:
         self.link.set_position_target(waypoint, self.yaw)

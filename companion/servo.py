@@ -283,10 +283,41 @@ def depth_against_wall(flow: np.ndarray, masks: list[np.ndarray], focal_px: floa
     from companion.gap import CameraMotion, inverse_depth_from_flow
 
     rho, valid = inverse_depth_from_flow(flow, CameraMotion(translation=motion_direction_cam))
+    return _depth_ratios(rho, valid, masks, focal_px, textured)[0]
+
+
+def wall_and_openings(flow: np.ndarray, masks: list[np.ndarray], translation_m: float, focal_px: float,
+                      max_depth_ratio: float, motion_direction_cam: tuple[float, float, float] | None = None,
+                      textured: np.ndarray | None = None
+                      ) -> tuple[list[int], list[float], float | None, float | None]:
+    """One frame pair's openings and wall from one inverse depth: the indices of the ``masks`` kept as openings
+    (:func:`depth_against_wall` at most ``max_depth_ratio``; all of them without ``textured``, as for a pair
+    that moved too little to judge), the ratios of those set aside, and the wall's distance and turn read
+    outside the kept ones (:func:`wall_from_flow`; None, None when none is kept).  The plane the ratios were
+    judged by is the wall's when nothing is set aside."""
+    from companion.gap import CameraMotion, inverse_depth_from_flow
+
+    rho, valid = inverse_depth_from_flow(flow, CameraMotion(translation=motion_direction_cam))
+    ratios, plane = (_depth_ratios(rho, valid, masks, focal_px, textured) if masks and textured is not None
+                     else ([None] * len(masks), None))
+    kept = [i for i, r in enumerate(ratios) if r is None or r <= max_depth_ratio]
+    patches = [r for r in ratios if r is not None and r > max_depth_ratio]
+    if not kept:
+        return kept, patches, None, None
+    left_out = _left_out(np.logical_or.reduce([masks[i] for i in kept]), textured)
+    if plane is None or patches:
+        plane = _wall_plane(rho, valid, left_out, focal_px)
+    distance = _distance(rho, valid, left_out, translation_m, plane) if translation_m > 1e-3 else None
+    return kept, patches, distance, _yaw(plane)
+
+
+def _depth_ratios(rho: np.ndarray, valid: np.ndarray, masks: list[np.ndarray], focal_px: float,
+                  textured: np.ndarray | None) -> tuple[list[float | None], np.ndarray | None]:
+    """:func:`depth_against_wall` from an inverse depth, and the plane fitted outside every mask (or None)."""
     gaps = np.logical_or.reduce(masks) if masks else None
     plane = _wall_plane(rho, valid, _left_out(gaps, textured), focal_px)
     if plane is None:
-        return [None] * len(masks)
+        return [None] * len(masks), None
     h, w = rho.shape
     ratios = []
     for mask in masks:
@@ -297,7 +328,7 @@ def depth_against_wall(flow: np.ndarray, masks: list[np.ndarray], focal_px: floa
         ys, xs = np.nonzero(inside)
         wall_rho = plane[0] * (xs - (w - 1) / 2) / focal_px + plane[1] * (ys - (h - 1) / 2) / focal_px + plane[2]
         ratios.append(float(np.median(rho[inside]) / np.median(wall_rho)))
-    return ratios
+    return ratios, plane
 
 
 def _left_out(gap_mask: np.ndarray | None, textured: np.ndarray | None) -> np.ndarray | None:

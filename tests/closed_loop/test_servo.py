@@ -605,6 +605,37 @@ def test_a_walls_depth_ratio_is_read_exactly_along_the_known_move_on_a_turned_an
     assert depth_against_wall(flow, [], F, move, ~empty) == []
 
 
+def test_the_openings_and_the_wall_read_together_are_those_read_apart():
+    from companion.servo import depth_against_wall, wall_and_openings, wall_from_flow
+
+    h, w = 240, 320
+    xn = (np.mgrid[0:h, 0:w][1].astype(np.float64) - (w - 1) / 2) / F
+    t = math.radians(12.0)
+    rho = 0.1 * (math.cos(t) - math.sin(t) * xn) / math.cos(t)
+    opening, patch = np.zeros((h, w), bool), np.zeros((h, w), bool)
+    opening[90:150, 60:120] = True
+    rho[opening] = 0.04
+    patch[60:200, 200:300] = True
+    move = (0.1, 0.0, 1.0)
+    flow = _flow_of(rho, move)
+    textured = np.ones((h, w), bool)
+    textured[:, 310:] = False
+    ratios = depth_against_wall(flow, [opening, patch], F, move, textured)
+    kept, patches, distance, turn = wall_and_openings(flow, [opening, patch], 0.2, F, 0.85, move, textured)
+    assert kept == [0] and patches == [ratios[1]] and ratios[1] > 0.85 > ratios[0]
+    assert (distance, turn) == wall_from_flow(flow, opening, 0.2, F, move, textured)
+    assert distance == pytest.approx(2.0, rel=0.01)
+    # nothing set aside: the plane the ratios were judged by is the wall's
+    assert wall_and_openings(flow, [opening], 0.2, F, 0.85, move, textured)[2:] == wall_from_flow(
+        flow, opening, 0.2, F, move, textured)
+    # no texture mask (a pair that moved too little to judge): every mask kept, the wall read outside them all
+    every, none_aside, both_d, both_t = wall_and_openings(flow, [opening, patch], 0.2, F, 0.85, move)
+    assert every == [0, 1] and none_aside == [] and (both_d, both_t) == wall_from_flow(
+        flow, opening | patch, 0.2, F, move)
+    alone = depth_against_wall(flow, [patch], F, move, textured)
+    assert wall_and_openings(flow, [patch], 0.2, F, 0.85, move, textured) == ([], alone, None, None)
+
+
 def test_the_wall_is_read_without_the_gaps_and_the_untextured_pixels_alike():
     from companion.servo import wall_distance_from_flow
 
