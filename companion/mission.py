@@ -238,7 +238,8 @@ class Mission:
     def _servo_searching(self, start):
         """Servo on an opening; refused, look again from either side of the start's axis (``search_shift_m``,
         the refused opening's side first), the refused ones set aside; returns what :meth:`_servo` returns, or
-        raises the combined refusal."""
+        raises the combined refusal.  With another opening seen on the way (``Refusal.alternative``), the first
+        look is in front of it instead, and the second from the side of the axis further from it."""
         try:
             return self._servo(start)
         except Refusal as exc:
@@ -251,10 +252,17 @@ class Mission:
         seen = first.place[0] if first.place is not None else self._across(self.link.telemetry.position)[0]
         side = 1.0 if seen >= axis else -1.0
         avoid = [first.place] if first.place is not None else []
+        places = [(axis + s * shift, f"{shift:.1f} m {'right' if s > 0 else 'left'} of the start")
+                  for s in (side, -side)]
+        if first.alternative is not None:
+            # as many looks as without one (a flight's time is bounded): the one nearer it gives way
+            other = first.alternative[0]
+            kept = max(places, key=lambda p: abs(p[0] - other))
+            across = other - axis
+            places = [(other, f"in front of another opening seen on the way, {abs(across):.1f} m "
+                              f"{'right' if across >= 0 else 'left'} of the start"), kept]
         looks = []
-        for s in (side, -side):
-            right = axis + s * shift
-            where = f"{shift:.1f} m {'right' if s > 0 else 'left'} of the start"
+        for right, where in places:
             prior = search_wall_bound(walls, right, self.config.search_wall_turn_rad,
                                       self.config.search_yaw_margin_rad)
             forward = ahead if prior is None else prior - self.servo.hold_distance_m - self.config.search_walk_m
@@ -392,7 +400,7 @@ class Mission:
                 log.info("%s", sight.note)
                 self._event(sight.note)
             if sight.refusal:
-                raise Refusal(sight.refusal, openings.world.used)
+                raise Refusal(sight.refusal, openings.world.used, openings.alternative())
             detection = sight.detection if sight.detection is not None else top
             used = sight.target_px
             ever_seen |= bool(found)
@@ -406,7 +414,8 @@ class Mission:
                 # end, rough readings of what lies behind it) would start the next look too near the wall
                 self._wall_seen = (here + ahead, across, wall_yaw)
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
-                raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on")
+                raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on", None,
+                              openings.alternative())
             if sight.offset_m is None:
                 next_step = servo_step(used, area_frac if used is not None else 0.0, k + 1, width, height, cfg,
                                        wall_distance)
@@ -472,12 +481,12 @@ class Mission:
         else:
             if step.offset_m is None and wall_prior is not None:   # a look pushes only what it has placed
                 raise Refusal(f"no opening placed within {cfg.step_budget} steps: not flying through",
-                              openings.world.used)
+                              openings.world.used, openings.alternative())
             if step.offset_m is not None:    # the metric law pushes only a sphere it has seen clear the edges
                 raise Refusal(f"could not centre on the opening within {cfg.step_budget} steps (still "
                               f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed"
                               f"{'' if step.aligned is False else ', not seen clear in the last frame'}): "
-                              "not flying through", openings.world.used)
+                              "not flying through", openings.world.used, openings.alternative())
         self.result.wall_distance_m = wall_distance
         here = self._forward(prev_position)
         if wall_distance is None:  # fewer readings than the minimum: still better than nothing
@@ -584,11 +593,13 @@ class Mission:
 class Refusal(RuntimeError):
     """The companion declines to fly through (an opening too small, one it cannot centre on, or none seen); the
     reason names the numbers behind the decision, and ``place`` where the refused opening is on the wall (right,
-    down across the heading, metres; None when none was placed)."""
+    down across the heading, metres; None when none was placed); ``alternative``, where another opening seen on
+    the way is (:meth:`companion.opening.OpeningTracker.alternative`; None: none)."""
 
-    def __init__(self, reason: str, place=None):
+    def __init__(self, reason: str, place=None, alternative=None):
         super().__init__(reason)
         self.place = place
+        self.alternative = alternative
 
 
 def _fmt(value) -> str:

@@ -20,7 +20,9 @@ two:
   what the vehicle steers and pushes by is the smaller of that radius after the latest estimate and after the
   one before (none before two): one view does not decide a push;
 - openings refused before (``avoid``: their places on the wall) are no candidates once the wall's distance places
-  what is seen (the mission's search for another opening).
+  what is seen (the mission's search for another opening);
+- the other openings it places are remembered (:class:`SeenElsewhere`), so that, the tracked one refused, the
+  search can look again in front of the widest of them (:meth:`OpeningTracker.alternative`).
 
 The clear radius of what is seen through an opening in a wall of thickness t is bounded by the opening's far
 edge, t beyond the wall's face (the tunnel's inner faces count as wall), so it is scaled by that depth.
@@ -62,6 +64,7 @@ class OpeningConfig:
                                     # then one placed where the tracked one is on the wall is taken for it
     mask_inset_px: float = 1.5      # the parallax mask's clear circle lies this far inside that of what is seen
                                     # through the opening (see clear_radius_m)
+    alternative_sightings: int = 3  # another opening is worth a look of the search once this many frames placed it
     max_depth_ratio: float = 0.85   # an opening's inverse depth is at most this fraction of the wall plane's
                                     # there (servo.depth_against_wall); above it, a patch of the wall (the
                                     # frame pairs of 40 hard-world flights, seed 60, re-rendered: at most 0.75
@@ -101,6 +104,19 @@ def candidates_in(detection, K: np.ndarray, attitude) -> list[Candidate]:
     return [Candidate(d, level_pixel(d.clear_centre or d.centroid, K, attitude[0], attitude[1])) for d in found]
 
 
+@dataclass
+class SeenElsewhere:
+    """An opening other than the tracked one, as the frames that placed it saw it."""
+
+    places: list[Point]             # (right, down), metres, one per sighting
+    radii: list[float]              # its clear radius (m) from each sighting
+
+    def place(self, window: int) -> Point:
+        """The median of the latest ``window`` places (the nearer views place it better)."""
+        recent = self.places[-window:]
+        return float(np.median([p[0] for p in recent])), float(np.median([p[1] for p in recent]))
+
+
 class OpeningTracker:
     def __init__(self, servo: ServoConfig | None = None, config: OpeningConfig | None = None,
                  pixel_tracker=None, avoid: tuple[Point, ...] = (), reach: tuple[float, float] | None = None
@@ -124,6 +140,7 @@ class OpeningTracker:
         self.switched = False
         self._announced = False
         self.separation_px = math.inf       # the closest two openings have been to each other in one frame
+        self.elsewhere: list[SeenElsewhere] = []  # the other openings placed (see alternative)
         self._unmatched = 0                 # frames in a row with openings in view, none matched to the tracked one
 
     @property
@@ -237,6 +254,8 @@ class OpeningTracker:
         # that one's place, rejects a place that jumps and takes it after two that agree
         chosen = next((cp for cp in placed if cp[0] is pick), None) if self.pixels.last_accepted else None
         self.world.update(chosen[1] if chosen is not None else None)
+        self._remember([cp for cp in placed if chosen is None or cp[0] is not chosen[0]], wall_distance_m, focal_px,
+                       radius_px)
         estimated = chosen is not None and self.world.last_accepted
         if estimated:
             estimate = self.clear_radius_m(radius_px(chosen[0].detection), wall_distance_m, focal_px)
@@ -289,6 +308,41 @@ class OpeningTracker:
                                        focal_px) if chosen[0].detection.mask.any() else 0.0
         return Sight(chosen[0].detection if chosen is not None else None, used, offset, steady, here,
                      len(self.places), self.close_places, note, refusal)
+
+    def _remember(self, placed: list[tuple[Candidate, Point]], wall_distance_m: float, focal_px: float,
+                  radius_px) -> None:
+        """Keep the places and clear radii of openings other than the tracked one (each sighting joins the
+        remembered opening whose place is within the world gate of it, or starts one)."""
+        gate, window = self.config.world_gate_m, self.config.radius_window
+        for c, p in placed:
+            if c.detection.clear_radius_px < self.config.min_opening_px:
+                continue
+            if self.world.used is not None and math.dist(p, self.world.used) <= gate:
+                continue                       # the tracked one, seen but not matched in the image
+            radius = self.clear_radius_m(radius_px(c.detection), wall_distance_m, focal_px)
+            near = _nearest(self.elsewhere, p, gate, lambda e: e.place(window))
+            if near is None:
+                self.elsewhere.append(SeenElsewhere([p], [radius]))
+            else:
+                near.places.append(p)
+                near.radii.append(radius)
+
+    def alternative(self) -> Point | None:
+        """Where (right, down) the widest other opening is, among those placed in ``alternative_sightings``
+        frames or more, away from the tracked one and from those refused before, and as wide as the body at
+        least in one view (seen at an angle or at the frame's edge, an opening shows less than it has); None
+        without one.  A refused opening's search looks again in front of it first (measured, hard world seeds
+        64-66: the search's looks from either side of the start's axis take no opening near the axis, and a
+        first look that followed another opening never came back to a passable one there)."""
+        gate, window = self.config.world_gate_m, self.config.radius_window
+        taken = [*self.avoid, *([self.world.used] if self.world.used is not None else [])]
+        ones = [e for e in self.elsewhere
+                if len(e.places) >= self.config.alternative_sightings
+                and max(e.radii) >= self.servo.body_radius_m
+                and all(math.dist(e.place(window), t) > gate for t in taken)]
+        if not ones:
+            return None
+        return max(ones, key=lambda e: max(e.radii)).place(window)
 
     def describe_too_small(self, detection, radius_m: float, wall_distance_m: float, focal_px: float) -> str:
         """'opening 0.31 × 0.42 m (0.30 m clear) is narrower than the vehicle's 0.38 m plus 0.10 m margin'."""

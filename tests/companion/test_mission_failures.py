@@ -199,6 +199,37 @@ def test_refused_it_looks_again_from_either_side_of_the_start_before_holding(tmp
     assert len(east) >= 8 and max(p[0] for p in east) > 1.0
 
 
+def test_refused_with_another_opening_seen_it_looks_in_front_of_that_one_first(tmp_path):
+    """Refused with another opening seen on the way (Refusal.alternative), the search's first look is in front of
+    that one (only openings within search_reach_m of it, the refused one set aside), and its second from the side
+    of the start's axis further from it: as many looks as without one."""
+    from companion.mission import Refusal
+
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)
+    mission = Mission(link, StillCamera(), None, None, RunLog(tmp_path, images=False),
+                      config=MissionConfig(estimate_wait_s=0.01))
+    mission.yaw = 0.0                                  # heading north: right is east
+    looks = []
+
+    def servo(start, avoid=(), wall_prior=None, reach=None):
+        looks.append((start, avoid, reach))
+        if len(looks) == 1:                            # the first look: refused, another opening seen 0.4 m right
+            raise Refusal("too small", (-0.7, -0.2), (0.4, -0.3))
+        raise Refusal(f"look {len(looks)}", None, (-2.0, 0.0))    # later looks' alternatives are not taken
+
+    mission._servo = servo
+    with pytest.raises(Refusal) as refused:
+        mission._servo_searching((0.0, 0.0, -1.5))
+    assert len(looks) == 3
+    reach = MissionConfig().search_reach_m
+    assert [r for _, _, r in looks[1:]] == [(0.4, reach), (-1.5, reach)]
+    assert looks[1][1] == ((-0.7, -0.2),)              # the refused one set aside
+    assert looks[1][0][1] == pytest.approx(0.4)        # the look starts in front of it (east 0.4 m)
+    assert str(refused.value) == ("too small; looked again from in front of another opening seen on the way, "
+                                  "0.4 m right of the start: look 2; from 1.5 m left of the start: look 3")
+
+
 def test_a_vehicle_that_disarmed_on_the_ground_before_takeoff_got_through_is_armed_again(tmp_path):
     link = ScriptedLink(climbs=False, disarmed_takeoffs=2)
     _fly(tmp_path, link)

@@ -177,6 +177,45 @@ def test_a_search_sets_refused_openings_aside_and_takes_none_beyond_its_reach():
     assert seen.detection is None and seen.offset_m is None
 
 
+def test_another_opening_placed_in_three_frames_is_remembered_as_the_alternative():
+    """OpeningTracker.alternative: the widest other opening placed in alternative_sightings frames, away from the
+    tracked one and from refused ones, and as wide as the body in one view (a refused opening's search looks
+    again in front of it first)."""
+    tracked, other = rect(20, 80, 120, 170), rect(190, 70, 310, 180)
+    small = rect(150, 20, 165, 35)                          # 16 px across at 1.5 m: narrower than the body
+    distance = 1.5
+
+    def place(det):
+        return ((det.clear_centre[0] - (W - 1) / 2) * distance / F, (det.clear_centre[1] - (H - 1) / 2) * distance / F)
+
+    tracker = OpeningTracker()
+    tracker.observe([cand(tracked)], (0.0, 0.0), None, F, W, H)
+    tracker.observe([cand(tracked)], (0.0, 0.0), None, F, W, H)          # confirmed: the tracked one
+    seen = tracker.observe([cand(tracked), cand(other), cand(small)], (0.0, 0.0), distance, F, W, H)
+    assert seen.detection is tracked and tracker.alternative() is None    # one sighting is not enough
+    for _ in range(2):
+        tracker.observe([cand(tracked), cand(other), cand(small)], (0.0, 0.0), distance, F, W, H)
+    assert tracker.alternative() == pytest.approx(place(other), abs=0.01)
+    # a sighting placed 0.2 m off (within the world gate) is the same remembered opening, not a new one
+    tracker.observe([cand(tracked), cand(other)], (0.2, 0.0), distance, F, W, H)
+    assert len(tracker.elsewhere) == 2 and [len(e.places) for e in tracker.elsewhere] == [4, 3]
+    assert tracker.alternative()[0] == pytest.approx(place(other)[0], abs=0.01)   # the median of its places
+    # refused before: no alternative (nor is the tracked one ever its own alternative)
+    avoiding = OpeningTracker(avoid=(place(other),))
+    for _ in range(2):
+        avoiding.observe([cand(tracked)], (0.0, 0.0), None, F, W, H)
+    for _ in range(4):
+        avoiding.observe([cand(tracked), cand(other)], (0.0, 0.0), distance, F, W, H)
+    assert avoiding.alternative() is None
+    # one narrower than the body in every view is no alternative, however often it is seen
+    only_small = OpeningTracker()
+    for _ in range(2):
+        only_small.observe([cand(tracked)], (0.0, 0.0), None, F, W, H)
+    for _ in range(4):
+        only_small.observe([cand(tracked), cand(small)], (0.0, 0.0), distance, F, W, H)
+    assert len(only_small.elsewhere[0].places) == 4 and only_small.alternative() is None
+
+
 def test_the_clear_radius_steered_by_holds_for_two_estimates_in_a_row():
     """One view's estimate, the first or one that jumps (measured, hard world: 0.16 -> 0.38 m on an opening 0.22 m
     clear, and a first one of 0.83 m on one 0.27 m clear, pushed at once and touched), does not set the radius the
