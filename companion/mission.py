@@ -29,6 +29,7 @@ from companion.motion import tilted_pixel, translation_in_camera
 from companion.opening import OpeningConfig, OpeningTracker, candidates_in
 from companion.perception import perceive
 from companion.runlog import RunLog
+from companion.search import look_places, search_wall_bound
 from companion.servo import (
     ServoConfig,
     far_distance_from_flow,
@@ -62,23 +63,6 @@ class State(enum.Enum):
     DONE = "done"
     REFUSED = "refused"
     FAILED = "failed"
-
-
-def search_wall_bound(walls: list[tuple], right: float, turn_rad: float, yaw_margin_rad: float) -> float | None:
-    """The nearest the wall's face can be (forward coordinate) at ``right`` across the heading, by every look's
-    last sight of it (forward, right, measured turn or None): a turned wall is nearer on one side (allowed for
-    up to ``turn_rad``, or, its turn measured, for that give or take ``yaw_margin_rad``), and beyond the wall's
-    end the flow shows only what is behind it (measured: a vehicle walked past a wall's end, then stepped
-    sideways into it).  The nearest of the looks' bounds counts: one taken far across, or with a turn measured
-    wrong, may put the wall too far (measured, hard world seed 41: a third look began 0.3 m from the wall)."""
-    bounds = []
-    for wall_forward, wall_right, wall_yaw in walls:
-        across = right - wall_right
-        bound = wall_forward - abs(across) * math.tan(turn_rad)
-        if wall_yaw is not None:
-            bound = max(bound, wall_forward + across * math.tan(wall_yaw) - abs(across) * math.tan(yaw_margin_rad))
-        bounds.append(bound)
-    return min(bounds) if bounds else None
 
 
 @dataclass(frozen=True)
@@ -252,17 +236,9 @@ class Mission:
         seen = first.place[0] if first.place is not None else self._across(self.link.telemetry.position)[0]
         side = 1.0 if seen >= axis else -1.0
         avoid = [first.place] if first.place is not None else []
-        places = [(axis + s * shift, f"{shift:.1f} m {'right' if s > 0 else 'left'} of the start")
-                  for s in (side, -side)]
-        if first.alternative is not None:
-            # as many looks as without one (a flight's time is bounded): the one nearer it gives way
-            other = first.alternative[0]
-            kept = max(places, key=lambda p: abs(p[0] - other))
-            across = other - axis
-            places = [(other, f"in front of another opening seen on the way, {abs(across):.1f} m "
-                              f"{'right' if across >= 0 else 'left'} of the start"), kept]
         looks = []
-        for right, where in places:
+        for right, where in look_places(axis, shift, side,
+                                        first.alternative[0] if first.alternative is not None else None):
             prior = search_wall_bound(walls, right, self.config.search_wall_turn_rad,
                                       self.config.search_yaw_margin_rad)
             forward = ahead if prior is None else prior - self.servo.hold_distance_m - self.config.search_walk_m

@@ -10,7 +10,7 @@ follows the vehicle's own motion between readings, and answers two questions a s
 - how near the wall can be straight ahead (``ahead``): that distance, or the latest rough readings' median.
 
 A look of the search also has a ``prior``: the nearest the wall's face can be, from earlier looks
-(:func:`companion.mission.search_wall_bound`).  A reading beyond it plus ``slack_m`` is not believed, and the
+(:func:`companion.search.search_wall_bound`).  A reading beyond it plus ``slack_m`` is not believed, and the
 distance ahead is never taken beyond it, unless the look's own latest readings agree
 (:func:`companion.servo.wall_readings_agree`): then they are the wall.
 """

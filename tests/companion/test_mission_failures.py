@@ -320,13 +320,13 @@ def test_the_push_starts_where_the_vehicle_was_at_the_last_frame_not_at_its_wayp
 
 
 def test_a_look_is_bounded_by_the_nearest_wall_any_earlier_look_allows():
-    """companion.mission.search_wall_bound: each look's last sight of the wall (forward, right, measured turn)
+    """companion.search.search_wall_bound: each look's last sight of the wall (forward, right, measured turn)
     bounds where the wall's face can be at another look's place: up to search_wall_turn_rad turned, or its
     measured turn give or take search_yaw_margin_rad; of several looks, the nearest bound counts (measured: a
     look's sight far across with a turn measured wrong started the next look 0.3 m from the wall)."""
     import math
 
-    from companion.mission import search_wall_bound
+    from companion.search import search_wall_bound
 
     turn, margin = math.radians(25.0), math.radians(8.0)
     assert search_wall_bound([], 1.0, turn, margin) is None
@@ -359,6 +359,17 @@ def _look_by_the_image(tmp_path, detector, match: str | None = None) -> Recordin
     with pytest.raises(Refusal, match=match):
         mission._servo((0.0, 0.0, -1.5), (), 2.0, (0.0, 1.2))
     return link
+
+
+def test_the_looks_are_either_side_of_the_axis_or_in_front_of_another_opening_and_the_side_further_from_it():
+    """companion.search.look_places: the refused opening's side first, then the other; with another opening seen,
+    in front of it first, then whichever side is further from it (never a third look)."""
+    from companion.search import look_places
+
+    assert look_places(0.2, 1.5, -1.0) == [(-1.3, "1.5 m left of the start"), (1.7, "1.5 m right of the start")]
+    assert look_places(0.2, 1.5, -1.0, 0.6) == [(0.6, "in front of another opening seen on the way, 0.4 m right of "
+                                                      "the start"), (-1.3, "1.5 m left of the start")]
+    assert [r for r, _ in look_places(0.0, 1.5, 1.0, -2.4)] == [-2.4, 1.5]
 
 
 def test_a_look_steering_by_the_image_alone_keeps_off_the_wall_earlier_looks_placed(tmp_path):

@@ -1,0 +1,41 @@
+"""Where the search looks again from, once the first look refused (pure: no clock, no I/O).
+
+A look of the search is a servo of its own started across the start's heading; these functions say where (across
+the heading) the looks start and the nearest the wall can be there, from what earlier looks saw of it.
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def search_wall_bound(walls: list[tuple], right: float, turn_rad: float, yaw_margin_rad: float) -> float | None:
+    """The nearest the wall's face can be (forward coordinate) at ``right`` across the heading, by every look's
+    last sight of it (forward, right, measured turn or None): a turned wall is nearer on one side (allowed for
+    up to ``turn_rad``, or, its turn measured, for that give or take ``yaw_margin_rad``), and beyond the wall's
+    end the flow shows only what is behind it (measured: a vehicle walked past a wall's end, then stepped
+    sideways into it).  The nearest of the looks' bounds counts: one taken far across, or with a turn measured
+    wrong, may put the wall too far (measured, hard world seed 41: a third look began 0.3 m from the wall)."""
+    bounds = []
+    for wall_forward, wall_right, wall_yaw in walls:
+        across = right - wall_right
+        bound = wall_forward - abs(across) * math.tan(turn_rad)
+        if wall_yaw is not None:
+            bound = max(bound, wall_forward + across * math.tan(wall_yaw) - abs(across) * math.tan(yaw_margin_rad))
+        bounds.append(bound)
+    return min(bounds) if bounds else None
+
+
+def look_places(axis: float, shift: float, side: float, alternative: float | None = None) -> list[tuple[float, str]]:
+    """The looks' places across the heading (right, metres) and how to name them: ``shift`` to ``side`` (+1 right,
+    -1 left: the refused opening's side) of the start's ``axis``, then to the other side; with ``alternative``
+    (where another opening the first look placed is across the heading), first in front of it, then the one of
+    the two sides further from it, so that there are as many looks as without one (a flight's time is bounded:
+    the longest failing flights of the hard world took 210 s of the launcher's 300 s)."""
+    places = [(axis + s * shift, f"{shift:.1f} m {'right' if s > 0 else 'left'} of the start") for s in (side, -side)]
+    if alternative is None:
+        return places
+    across = alternative - axis
+    kept = max(places, key=lambda p: abs(p[0] - alternative))
+    return [(alternative, f"in front of another opening seen on the way, {abs(across):.1f} m "
+                          f"{'right' if across >= 0 else 'left'} of the start"), kept]
