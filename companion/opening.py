@@ -104,6 +104,11 @@ def candidates_in(detection, K: np.ndarray, attitude) -> list[Candidate]:
     return [Candidate(d, level_pixel(d.clear_centre or d.centroid, K, attitude[0], attitude[1])) for d in found]
 
 
+def median_place(places: list[Point]) -> Point:
+    """The per-axis median of places (right, down): an opening does not move, its sightings jitter."""
+    return float(np.median([p[0] for p in places])), float(np.median([p[1] for p in places]))
+
+
 @dataclass
 class SeenElsewhere:
     """An opening other than the tracked one, as the frames that placed it saw it."""
@@ -113,8 +118,7 @@ class SeenElsewhere:
 
     def place(self, window: int) -> Point:
         """The median of the latest ``window`` places (the nearer views place it better)."""
-        recent = self.places[-window:]
-        return float(np.median([p[0] for p in recent])), float(np.median([p[1] for p in recent]))
+        return median_place(self.places[-window:])
 
 
 class OpeningTracker:
@@ -266,8 +270,7 @@ class OpeningTracker:
             self.places.append(chosen[1])
             self.close_places += wall_distance_m <= self.config.decide_within_m
         # the opening does not move: its place is the median of the latest sightings (each jitters by a few px)
-        recent = self.places[-self.config.radius_window:] or [self.world.used]
-        target = (float(np.median([p[0] for p in recent])), float(np.median([p[1] for p in recent])))
+        target = median_place(self.places[-self.config.radius_window:] or [self.world.used])
         # steered by every estimate until close ones, taken in front of the opening, are there to judge it by
         best = self.close_radii or self.radii
         radius = float(np.percentile(best[-self.config.radius_window:], 75)) if best else 0.0
