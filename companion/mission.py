@@ -23,25 +23,19 @@ import numpy as np
 
 from companion.camera import CameraError, FrameSource
 from companion.flow.colour import flow_to_colour
-from companion.gap import textured_pixels
 from companion.link.base import AutopilotLink, LinkError, LinkLost
-from companion.motion import tilted_pixel, translation_in_camera
-from companion.opening import OpeningConfig, OpeningTracker, candidates_in
+from companion.look import across_heading, along_heading, next_look_step, see_frame
+from companion.motion import tilted_pixel
+from companion.opening import OpeningConfig, OpeningTracker
 from companion.perception import perceive
 from companion.runlog import RunLog
 from companion.search import look_places, search_wall_bound
 from companion.servo import (
     ServoConfig,
-    far_distance_from_flow,
     heading_to_ned,
-    metric_step,
-    normalised_error,
     push_length,
     push_waypoints,
     servo_step,
-    wall_and_openings,
-    wall_distance_from_flow,
-    wall_slope,
 )
 from companion.storyboard import Storyboard, StoryRow, step_text
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
@@ -297,7 +291,6 @@ class Mission:
         wall = WallTrack(wall_prior, self.config.min_wall_measurements, self.config.search_wall_slack_m,
                          self.config.search_wall_agree_m, self.config.search_wall_agree_per_m)
         openings = OpeningTracker(cfg, self.openings, self.tracker, avoid, reach)
-        focal = float(self.camera.K[0, 0])
         ever_seen = False
         # no step lower than min_altitude_m above home (or the flight's own height, if lower), whatever the image
         floor = self._home_z - min(self.config.min_altitude_m, self.config.altitude_m)
@@ -323,101 +316,34 @@ class Mission:
             still = moved < self.config.min_baseline_m
             seen = perceive(prev.rgb, frame.rgb, prev_attitude, attitude, self.camera.K, self.flow, self.detector,
                             self.derotate, moved, self.config.min_baseline_m)
-            flow, top = seen.flow, seen.detection
             self._log_frame(n, frame, position, attitude)
-            # Forward flow lives on the first frame's pixels: so do the masks, which are placed and measured from
-            # where that frame was taken (measured: scaled from the second frame's distance, every opening came
-            # out 10 % small at a 0.18 m step from 1.6 m, and a sideways step misplaced it by the step).
-            candidates = candidates_in(top, self.camera.K, prev_attitude)
-            # The wall is read where the first frame has texture, along the move the autopilot's estimates say
-            # (the flow's own focus of expansion is pulled off by the empty space beyond a wall's end: measured,
-            # hard world seed 60, readings 5-28 % long there, and a vehicle walked into the wall)
-            direction = translation_in_camera(prev_position, position, prev_attitude)
-            textured = textured_pixels(prev.rgb) if not still else None
-            # A detection whose depth is the wall's is a patch of it, not an opening (OpeningConfig.max_depth_ratio:
-            # measured, hard world seed 64, a sideways step past a turned wall showed its farther half as a "gap" 42 %
-            # of the frame, pushed at once from 2.2 m into the wall; on seed 60, blobs on a wall followed to it).
-            # Only with a detected gap is the wall read: the openings' masks keep the far pixels out of its depth
-            # statistic (measured: without one, readings of 0.7–0.9 m for a wall 2.8 m away pushed far too early).
-            kept, patches, reading, turn = wall_and_openings(
-                flow, [c.detection.mask for c in candidates], moved, focal, self.openings.max_depth_ratio,
-                direction, textured)
-            candidates = [candidates[i] for i in kept]
-            found = [c.detection for c in candidates]
-            wall_patches = [round(r, 3) for r in patches]
-            if patches:
-                note = (f"set aside {len(patches)} of {len(kept) + len(patches)} openings as patches of the wall "
-                        f"(inverse depth {', '.join(f'{r:.2f}' for r in patches)} of the wall's there)")
+            view = see_frame(seen, prev.rgb, prev_position, position, prev_attitude, moved, still, self.camera.K,
+                             self.yaw, openings, wall)
+            sight, found, ahead = view.sight, view.found, view.ahead
+            wall_distance, detection, used = view.wall_distance, view.detection, view.sight.target_px
+            if view.wall_patches:
+                note = (f"set aside {len(view.wall_patches)} of {len(found) + len(view.wall_patches)} openings as "
+                        f"patches of the wall (inverse depth {', '.join(f'{r:.2f}' for r in view.wall_patches)} of "
+                        "the wall's there)")
                 log.info("%s", note)
                 self._event(note)
-            here, place = self._forward(position), self._across(position)   # place: (right, down) now
-            across = place[0]
-            measured = wall.add(
-                here, across, reading,
-                # without a gap the wall is still measured, for one purpose only: not to walk into it blind
-                None if found or still else wall_distance_from_flow(flow, None, moved, direction, focal, textured),
-                turn if moved >= 0.08 else None)
-            wall_yaw = wall.turn
-            # A distance enters the push decision only once three measurements agree on a median; a look's is
-            # bounded by where earlier looks put the wall, unless its own readings agree (measured, hard world seeds
-            # 46-48: bounds from sights taken 1.4-3 m across put the wall up to 1.4 m too near; looks stopped
-            # 1.3-2.3 m from it "with the wall 1.09 m ahead", or stalled 2.5 m out, their openings scaled by that
-            # wrong distance to half their size).
-            wall_distance, ahead = wall.view(here, across)
-            axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), self.camera.K, prev_attitude[0],
-                                prev_attitude[1])
-            # the wall straight ahead of where the first frame (whose pixels the masks live in) was taken
-            seen_from, seen_place = self._forward(prev_position), self._across(prev_position)
-            seen_distance = (wall_distance + (here - seen_from) + (seen_place[0] - across) * wall_slope(wall_yaw)
-                             if wall_distance is not None else None)
-            sight = openings.observe(candidates, seen_place, seen_distance, focal, width, height, axis, moved,
-                                     wall_yaw, viewer_m=place)
             if sight.note:
                 log.info("%s", sight.note)
                 self._event(sight.note)
             if sight.refusal:
                 raise Refusal(sight.refusal, openings.world.used, openings.alternative())
-            detection = sight.detection if sight.detection is not None else top
-            used = sight.target_px
             ever_seen |= bool(found)
-            area_frac = detection.area / float(width * height) if detection.found else 0.0
-            far = (far_distance_from_flow(flow, detection.mask, moved)
-                   if sight.detection is not None and openings.last_accepted else None)
-            if far is not None:
-                wall.add_far(here, far, measured)
             if ahead is not None:
                 # bounded as the look's own steps are: a look's reading beyond its bound (measured: by a wall's
                 # end, rough readings of what lies behind it) would start the next look too near the wall
-                self._wall_seen = (here + ahead, across, wall_yaw)
+                self._wall_seen = (view.here + ahead, view.across, view.wall_yaw)
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
                 raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on", None,
                               openings.alternative())
-            if sight.offset_m is None:
-                next_step = servo_step(used, area_frac if used is not None else 0.0, k + 1, width, height, cfg,
-                                       wall_distance)
-                if used is None:     # blind: a new parallax baseline, but no push, nor closer than the hold
-                    forward = next_step.delta_heading[0]
-                    if ahead is not None:
-                        forward = min(forward, max(0.0, ahead - cfg.hold_distance_m))
-                    next_step = dataclasses.replace(next_step, delta_heading=(forward, 0.0, 0.0), push=False)
-                elif wall_prior is not None and wall_distance is None:
-                    # a look steering by the image alone, its wall not measured yet, is as blind to the wall as
-                    # one seeing nothing: no nearer than the hold distance to where earlier looks put it, and no
-                    # push (measured, hard world seed 46: a look whose target was a stale image position walked
-                    # 2 m on and into the wall)
-                    forward = min(next_step.delta_heading[0], max(0.0, ahead - cfg.hold_distance_m))
-                    # ... and steps across only towards a target seen in this frame: a held one re-applied its
-                    # last correction at every step (measured, hard world seed 49: held at the hold distance,
-                    # no baseline, no new sighting; 0.05 m down per step for 20 steps, to the ground)
-                    sideways = next_step.delta_heading[1:] if openings.last_accepted else (0.0, 0.0)
-                    next_step = dataclasses.replace(next_step, delta_heading=(forward, *sideways), push=False)
-            else:
-                next_step = metric_step(sight.offset_m, sight.clear_radius_m, wall_distance, area_frac, k + 1, cfg,
-                                        normalised_error(used, width, height), sight.clearance_here_m,
-                                        sight.sightings, sight.close_sightings)
+            next_step = next_look_step(view, k, width, height, cfg, wall_prior, openings.last_accepted)
             self.clock.sleep_until(t_frame + self.config.perception_latency_s)
             self.result.servo_steps = self._steps_before + k + 1
-            flow_bgr = flow_to_colour(flow, bgr=True)
+            flow_bgr = flow_to_colour(seen.flow, bgr=True)
             self.runlog.save_images(n, rgb=frame.rgb, flow_bgr=flow_bgr, mask=detection.mask)
             state = ("push" if next_step.push else "aligned" if next_step.aligned else
                      "close" if next_step.close else "servo") + (f"; {sight.note}" if sight.note else "")
@@ -436,17 +362,17 @@ class Mission:
                 "clear_radius_m": sight.clear_radius_m, "clearance_here_m": sight.clearance_here_m,
                 "note": sight.note,
                 "attitude_est": attitude, "accepted": self.tracker.last_accepted,
-                "no_gap_reason": detection.reason, "area_frac": area_frac,
+                "no_gap_reason": detection.reason, "area_frac": view.area_frac,
                 "error": next_step.error, "next_delta_heading": next_step.delta_heading, "close": next_step.close,
-                "push": next_step.push, "wall_distance_m": measured, "far_distance_m": far,
-                "wall_patches": wall_patches,
+                "push": next_step.push, "wall_distance_m": view.measured, "far_distance_m": view.far,
+                "wall_patches": [round(r, 3) for r in view.wall_patches],
                 "offset_m": next_step.offset_m, "tolerance_m": next_step.tolerance_m, "aligned": next_step.aligned,
                 "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": seen.flow_ms,
                            "detect_ms": seen.detect_ms},
             })
             log.info("step %d: centroid %s used %s area %.3f error %s wall %.2f m%s", n,
-                     _fmt(detection.centroid), _fmt(used), area_frac, _fmt(next_step.error),
-                     measured if measured is not None else math.nan, " → push" if next_step.push else "")
+                     _fmt(detection.centroid), _fmt(used), view.area_frac, _fmt(next_step.error),
+                     view.measured if view.measured is not None else math.nan, " → push" if next_step.push else "")
             if not ever_seen and k + 1 >= self.config.no_gap_limit:
                 # nothing seen to fly through: the vehicle has touched nothing and holds, as for an opening
                 # judged too small (an opening too small for the detector is the same decision, earlier)
@@ -515,12 +441,10 @@ class Mission:
                            "attitude_est": attitude_est})
 
     def _forward(self, position) -> float:
-        """Coordinate along the initial heading (the direction of travel toward the wall)."""
-        return position[0] * math.cos(self.yaw) + position[1] * math.sin(self.yaw)
+        return along_heading(position, self.yaw)
 
     def _across(self, position) -> tuple[float, float]:
-        """Coordinates across the initial heading: (right of it, down), metres."""
-        return -position[0] * math.sin(self.yaw) + position[1] * math.cos(self.yaw), position[2]
+        return across_heading(position, self.yaw)
 
     def _traverse(self, start, bias, wall_distance, far_distance=None) -> None:
         length = push_length(wall_distance, self.servo, far_distance)
