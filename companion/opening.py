@@ -347,8 +347,9 @@ class OpeningTracker:
         64-66: the search's looks from either side of the start's axis take no opening near the axis, and a
         first look that followed another opening never came back to a passable one there).  Away from the tracked
         one means from every place it was accepted at, not only the latest: as the wall's distance settles, an
-        opening's place moves, and a part of it placed beside it early on is it (measured, hard world seed 66:
-        the only other opening remembered was the refused one, and its look refused again)."""
+        opening's place moves, and a part of it placed beside it early on is it (hard world seed 66,
+        hard_0760398658: the look in front of the one other opening remembered found only the refused one; not
+        flown again with this rule)."""
         gate, window = self.config.world_gate_m, self.config.radius_window
         taken = [*self.avoid, *self.places, *([self.world.used] if self.world.used is not None else [])]
         ones = [e for e in self.elsewhere
