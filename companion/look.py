@@ -87,7 +87,8 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
                                                      openings.config.max_depth_ratio, direction, textured)
     candidates = [candidates[i] for i in kept]
     found = [c.detection for c in candidates]
-    here, (across, _) = along_heading(position, yaw), across_heading(position, yaw)
+    here, place = along_heading(position, yaw), across_heading(position, yaw)   # place: (right, down) now
+    across = place[0]
     measured = wall.add(
         here, across, reading,
         # without a gap the wall is still measured, for one purpose only: not to walk into it blind
@@ -106,7 +107,7 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
     seen_distance = (wall_distance + (here - seen_from) + (seen_place[0] - across) * wall_slope(wall_yaw)
                      if wall_distance is not None else None)
     sight = openings.observe(candidates, seen_place, seen_distance, focal, width, height, axis, moved, wall_yaw,
-                             viewer_m=across_heading(position, yaw))
+                             viewer_m=place)
     detection = sight.detection if sight.detection is not None else top
     area_frac = detection.area / float(width * height) if detection.found else 0.0
     far = (far_distance_from_flow(flow, detection.mask, moved)

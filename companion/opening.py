@@ -182,11 +182,10 @@ class OpeningTracker:
         the wall is turned against the camera's axis, when measured (an opening seen at an angle looks narrower
         than it is in the wall, where the body crosses it)."""
         viewer = across_m if viewer_m is None else viewer_m
-        stretch = 1.0
-        if wall_yaw_rad is not None and abs(wall_yaw_rad) > TURN_NEGLIGIBLE_RAD:
-            stretch = (turned_wall_stretch(self.servo.body_radius_m + self.servo.clearance_margin_m, wall_distance_m,
-                                           wall_yaw_rad, self.servo.wall_thickness_m)
-                       if wall_distance_m is not None else 1.0 / math.cos(wall_yaw_rad))
+        stretch = 1.0          # used only once the wall's distance is known (see the return below without it)
+        if wall_distance_m is not None and wall_yaw_rad is not None and abs(wall_yaw_rad) > TURN_NEGLIGIBLE_RAD:
+            stretch = turned_wall_stretch(self.servo.body_radius_m + self.servo.clearance_margin_m, wall_distance_m,
+                                          wall_yaw_rad, self.servo.wall_thickness_m)
 
         walled: dict[int, tuple[np.ndarray, float]] = {}
 
