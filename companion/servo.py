@@ -65,6 +65,10 @@ class ServoConfig:
     roomy_close_sightings: int = 1  # ... this many of them with the wall within OpeningConfig.decide_within_m
                                     # (measured, hard world seed 60: a place tracked from 2-4 m, last seen 1.85 m
                                     # out, was a blob on the wall; pushed on from 1.2 m, the vehicle hit it)
+    push_sightings: int = 3         # no push on an opening fewer frames than this placed, the tracked one's since
+                                    # any switch (measured, hard world seed 69: lost at 1.0 m from the wall, the
+                                    # tracker took another opening and pushed on its second sighting, which put
+                                    # a 0.40 m wide ellipse at 0.82 m; the vehicle hit it)
 
 
 @dataclass(frozen=True)
@@ -137,7 +141,8 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
     distance from the heading's axis to the opening's nearest edge seen in this frame, when there is one (an
     elongated opening leaves room along its length), else from the offset and the clear radius.  Not seen in
     this frame, it pushes only with room to spare, on a place ``sightings`` frames placed, ``close_sightings``
-    of them from near the wall.  ``error``: the image error, for the record."""
+    of them from near the wall; and never on one fewer than ``push_sightings`` frames placed (after a switch,
+    the new one's), where it creeps on as for an unseen place.  ``error``: the image error, for the record."""
     budget_spent = step_index + 1 >= config.step_budget
     tolerance = alignment_tolerance(clear_radius_m, config)
     fresh = clearance_here_m is not None
@@ -157,9 +162,10 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
     # them close; one that only just fits must have been seen clear in this very frame.
     roomy = (aligned and tolerance >= config.roomy_tolerance_m and sightings >= config.roomy_sightings
              and close_sightings >= config.roomy_close_sightings)
+    placed = sightings >= config.push_sightings
     if not aligned:
         forward = min(forward, max(0.0, distance_m - config.hold_distance_m))
-    elif not (fresh or roomy) and large:
+    elif not ((fresh or roomy) and placed) and large:
         forward = min(forward, config.probe_step_m) if distance_m > config.probe_floor_m else 0.0
     if forward < 0.02 and abs(dy) < 0.02 and abs(dz) < 0.02:
         # held in place a frame pair has no parallax to see the opening by: step sideways, right and left in
@@ -167,7 +173,7 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
         # of expansion, where the flow shows no depth (measured, hard world seed 43: probing back and forth 0.9 m
         # from a turned wall, a vehicle centred on an opening never saw it clear again)
         dy = config.probe_step_m if step_index % 2 == 0 else -config.probe_step_m
-    push = aligned and (fresh or roomy) and (large or budget_spent)
+    push = aligned and (fresh or roomy) and placed and (large or budget_spent)
     return ServoStep((forward, dy, dz), error, close, push, (float(offset_m[0]), float(offset_m[1])), tolerance,
                      aligned)
 

@@ -141,7 +141,8 @@ def test_metric_step_removes_most_of_the_offset_and_holds_off_the_wall_until_the
     assert held.delta_heading[0] == 0.0 and not held.push
     big = metric_step((2.0, -2.0), 0.45, 2.0, 0.01, 5, cfg)
     assert big.delta_heading[1:] == (cfg.metric_max_step_m, -cfg.metric_max_step_m)
-    centred = metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, clearance_here_m=0.45 - math.hypot(0.05, 0.02))
+    centred = metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, clearance_here_m=0.45 - math.hypot(0.05, 0.02),
+                          sightings=3)
     assert centred.aligned and centred.push and centred.delta_heading[0] > 0
     # aligned by the tracked place alone, not seen in this frame, and only just fitting: no push; creep on to
     # see it again; with room to spare, push on the tracked place
@@ -172,9 +173,9 @@ def test_the_metric_law_never_pushes_a_sphere_that_would_not_clear():
     cfg = ServoConfig()
     spent = metric_step((0.3, 0.0), 0.45, 1.1, 0.3, cfg.step_budget - 1, cfg)
     assert not spent.push and spent.aligned is False      # the budget is spent, but pushing would touch
-    assert metric_step((0.02, 0.0), 0.45, 1.5, 0.05, cfg.step_budget - 1, cfg, clearance_here_m=0.43).push
+    assert metric_step((0.02, 0.0), 0.45, 1.5, 0.05, cfg.step_budget - 1, cfg, clearance_here_m=0.43, sightings=3).push
     # seen from where it is: the clearance flying straight on decides, not the offset to the clear centre
-    slot = metric_step((0.3, 0.0), 0.25, 1.2, 0.3, 5, cfg, clearance_here_m=0.25)
+    slot = metric_step((0.3, 0.0), 0.25, 1.2, 0.3, 5, cfg, clearance_here_m=0.25, sightings=3)
     assert slot.aligned and slot.push        # 0.3 m along a long slot, as much room as at its middle
     narrow = metric_step((0.0, 0.0), 0.2, 1.2, 0.3, 5, cfg)  # 0.4 m across: no offset is good enough
     assert narrow.tolerance_m < 0 and not narrow.push and narrow.aligned is False
@@ -191,7 +192,8 @@ def test_metric_servo_converges_on_a_far_off_axis_opening_before_the_wall():
     for k in range(30):
         distance = gap[0] - p[0]
         off = (gap[1] - p[1], gap[2] - p[2])
-        step = metric_step(off, 0.45, distance, 0.05, k, cfg, clearance_here_m=max(0.0, 0.45 - math.hypot(*off)))
+        step = metric_step(off, 0.45, distance, 0.05, k, cfg, clearance_here_m=max(0.0, 0.45 - math.hypot(*off)),
+                           sightings=k + 1)
         if step.push:
             break
         p = [p[0] + step.delta_heading[0], p[1] + step.delta_heading[1], p[2] + step.delta_heading[2]]
@@ -354,8 +356,11 @@ def test_metric_step_thresholds_are_inclusive():
     # the offset exactly the tolerance still fits
     assert metric_step((0.125, 0.0), 0.5, 3.0, 0.0, 0, cfg).aligned
     # large at exactly the push area / distance: a fresh, aligned step pushes
-    assert metric_step((0.0, 0.0), 0.5, 3.0, cfg.push_area_frac, 5, cfg, clearance_here_m=0.5).push
-    assert metric_step((0.0, 0.0), 0.5, cfg.push_distance_m, 0.0, 5, cfg, clearance_here_m=0.5).push
+    placed = {"clearance_here_m": 0.5, "sightings": cfg.push_sightings}
+    assert metric_step((0.0, 0.0), 0.5, 3.0, cfg.push_area_frac, 5, cfg, **placed).push
+    assert metric_step((0.0, 0.0), 0.5, cfg.push_distance_m, 0.0, 5, cfg, **placed).push
+    assert not metric_step((0.0, 0.0), 0.5, 3.0, cfg.push_area_frac, 5, cfg, clearance_here_m=0.5,
+                           sightings=cfg.push_sightings - 1).push
     # room to spare exactly the roomy tolerance: pushes on the tracked place after enough sightings
     assert metric_step((0.0, 0.0), 0.5, 1.0, 0.5, 5, cfg, sightings=cfg.roomy_sightings,
                        close_sightings=cfg.roomy_close_sightings).push
@@ -367,11 +372,32 @@ def test_metric_step_thresholds_are_inclusive():
                            close_sightings=cfg.roomy_close_sightings - 1).push
 
 
+def test_no_push_on_an_opening_placed_by_fewer_than_push_sightings_frames():
+    """hard world seed 69: the tracked opening lost 1.0 m from the wall, the tracker took another and pushed on
+    its second sighting, which put a 0.40 m wide ellipse at 0.82 m; the vehicle hit it."""
+    from companion.servo import metric_step
+
+    cfg = ServoConfig()
+    seen = {"clearance_here_m": 0.4}             # seen clear in this frame, centred, the wall close
+    for n in range(cfg.push_sightings):
+        step = metric_step((0.0, 0.0), 0.45, 1.0, 0.3, 5, cfg, sightings=n, **seen)
+        assert step.aligned and not step.push
+        # held like an unseen place: a creep on while the wall is beyond the probe floor, none nearer
+        assert step.delta_heading[0] == pytest.approx(cfg.probe_step_m)
+        assert metric_step((0.0, 0.0), 0.45, 0.85, 0.3, 5, cfg, sightings=n, **seen).delta_heading[0] == 0.0
+        # nor when the step budget is spent
+        assert not metric_step((0.0, 0.0), 0.45, 1.0, 0.3, cfg.step_budget - 1, cfg, sightings=n, **seen).push
+    assert metric_step((0.0, 0.0), 0.45, 1.0, 0.3, 5, cfg, sightings=cfg.push_sightings, **seen).push
+    # far from the wall the approach goes on at the full step whatever the sightings
+    assert metric_step((0.0, 0.0), 0.45, 2.5, 0.02, 5, cfg, sightings=0, **seen).delta_heading[0] == \
+        pytest.approx(cfg.forward_step_m)
+
+
 def test_metric_step_budget_and_forward_step():
     from companion.servo import metric_step
 
     cfg = ServoConfig()
-    fresh = {"clearance_here_m": 0.45}
+    fresh = {"clearance_here_m": 0.45, "sightings": cfg.push_sightings}
     assert not metric_step((0.0, 0.0), 0.45, 3.0, 0.0, cfg.step_budget - 2, cfg, **fresh).push
     assert metric_step((0.0, 0.0), 0.45, 3.0, 0.0, cfg.step_budget - 1, cfg, **fresh).push
     # seen clear in this frame and large: forward by the slowdown law, not the probe's creep
