@@ -29,7 +29,7 @@ from companion.motion import tilted_pixel
 from companion.opening import OpeningConfig, OpeningTracker
 from companion.perception import perceive
 from companion.runlog import RunLog
-from companion.search import look_places, search_wall_bound
+from companion.search import look_places, search_wall_bound, search_wall_ceiling
 from companion.servo import (
     ServoConfig,
     heading_to_ned,
@@ -235,6 +235,8 @@ class Mission:
                                         first.alternative[0] if first.alternative is not None else None):
             prior = search_wall_bound(walls, right, self.config.search_wall_turn_rad,
                                       self.config.search_yaw_margin_rad)
+            ceiling = search_wall_ceiling(walls, right, self.config.search_wall_turn_rad,
+                                          self.config.search_yaw_margin_rad)
             forward = ahead if prior is None else prior - self.servo.hold_distance_m - self.config.search_walk_m
             note = f"refused ({first}); looking again from {where}" + (
                 "" if prior is None else f", {prior - forward:.2f} m before the nearest the wall can be there")
@@ -249,7 +251,7 @@ class Mission:
             self._steps_before = self.result.servo_steps
             self._wall_seen = None
             try:
-                return self._servo(look, tuple(avoid), prior, (right, self.config.search_reach_m))
+                return self._servo(look, tuple(avoid), prior, (right, self.config.search_reach_m), ceiling)
             except Refusal as exc:
                 looks.append(f"from {where}: {exc}")
                 if self._wall_seen is not None:
@@ -267,12 +269,13 @@ class Mission:
         """NED from coordinates along and across the initial heading (the inverse of _forward and _across)."""
         return heading_to_ned((forward, right, down), self.yaw)
 
-    def _servo(self, start, avoid: tuple = (), wall_prior: float | None = None, reach=None):
+    def _servo(self, start, avoid: tuple = (), wall_prior: float | None = None, reach=None,
+               wall_ceiling: float | None = None):
         """Servo steps until push; returns (where the push starts, lateral/vertical bias, wall distance).
         ``avoid``: places of openings refused before; ``wall_prior``: the nearest the wall's face can be (forward
         coordinate), from earlier looks: no blind step goes nearer than the hold distance to it; ``reach``: (right,
         metres), a look's bound on the openings it takes (companion.opening), and then no push without a clear
-        sighting."""
+        sighting; ``wall_ceiling``: the furthest the wall's face can be, from earlier looks (companion.wall)."""
         cfg = self.servo if reach is None else dataclasses.replace(self.servo, roomy_tolerance_m=math.inf)
         width, height = self.camera.width, self.camera.height
         prev = self.camera.capture()
@@ -289,7 +292,7 @@ class Mission:
         step = servo_step(None, 0.0, 0, width, height, cfg)
         wall_distance = None
         wall = WallTrack(wall_prior, self.config.min_wall_measurements, self.config.search_wall_slack_m,
-                         self.config.search_wall_agree_m, self.config.search_wall_agree_per_m)
+                         self.config.search_wall_agree_m, self.config.search_wall_agree_per_m, wall_ceiling)
         openings = OpeningTracker(cfg, self.openings, self.tracker, avoid, reach)
         ever_seen = False
         # no step lower than min_altitude_m above home (or the flight's own height, if lower), whatever the image

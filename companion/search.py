@@ -26,6 +26,20 @@ def search_wall_bound(walls: list[tuple], right: float, turn_rad: float, yaw_mar
     return min(bounds) if bounds else None
 
 
+def search_wall_ceiling(walls: list[tuple], right: float, turn_rad: float, yaw_margin_rad: float) -> float | None:
+    """The furthest the wall's face can be (forward coordinate) at ``right``, by the same sights as
+    :func:`search_wall_bound` (turned the other way): what a look reads beyond it is what lies behind the wall's
+    end, not the wall.  The furthest of the looks' ceilings counts."""
+    ceilings = []
+    for wall_forward, wall_right, wall_yaw in walls:
+        across = right - wall_right
+        ceiling = wall_forward + abs(across) * math.tan(turn_rad)
+        if wall_yaw is not None:
+            ceiling = min(ceiling, wall_forward + across * math.tan(wall_yaw) + abs(across) * math.tan(yaw_margin_rad))
+        ceilings.append(ceiling)
+    return max(ceilings) if ceilings else None
+
+
 def look_places(axis: float, shift: float, side: float, alternative: float | None = None) -> list[tuple[float, str]]:
     """The looks' places across the heading (right, metres) and how to name them: ``shift`` to ``side`` (+1 right,
     -1 left: the refused opening's side) of the start's ``axis``, then to the other side; with ``alternative``

@@ -12,7 +12,11 @@ follows the vehicle's own motion between readings, and answers two questions a s
 A look of the search also has a ``prior``: the nearest the wall's face can be, from earlier looks
 (:func:`companion.search.search_wall_bound`).  A reading beyond it plus ``slack_m`` is not believed, and the
 distance ahead is never taken beyond it, unless the look's own latest readings agree
-(:func:`companion.servo.wall_readings_agree`): then they are the wall.
+(:func:`companion.servo.wall_readings_agree`): then they are the wall.  A look that sees no opening has only
+rough readings; when its latest ones agree and lie within the ``ceiling`` (the furthest the wall can be there,
+:func:`companion.search.search_wall_ceiling`) plus ``slack_m``, they too are the wall ahead (measured, hard world
+seeds 67 and 68: bounds allowing for a 25° turn held looks 1.5 m across 0.2-2.5 m short of the wall, where they
+saw nothing and refused).
 """
 
 from __future__ import annotations
@@ -29,13 +33,13 @@ TURN_MIN_READINGS = 3           # ... once there are this many
 
 class WallTrack:
     def __init__(self, prior: float | None = None, min_measurements: int = 3, slack_m: float = 0.3,
-                 agree_m: float = 0.05, agree_per_m: float = 0.05) -> None:
-        self.prior = prior
+                 agree_m: float = 0.05, agree_per_m: float = 0.05, ceiling: float | None = None) -> None:
+        self.prior, self.ceiling = prior, ceiling
         self.min_measurements = min_measurements
         self.slack_m, self.agree_m, self.agree_per_m = slack_m, agree_m, agree_per_m
         self.readings: list[tuple[float, float]] = []  # (forward coordinate of the wall, across coordinate
                                                        # measured from), one per reading
-        self.rough: list[float] = []   # ... the wall's forward coordinate, from frames without a gap too
+        self.rough: list[tuple[float, float]] = []   # ... and from frames without a gap too
         self.far: list[float] = []     # ... and the far surface's, seen through the opening
         self.turns: list[float] = []   # how far the wall is turned against the heading (rad)
 
@@ -52,7 +56,7 @@ class WallTrack:
             self.readings.append((here + measured, across))
         rough = measured if rough is None else rough
         if rough is not None and lo <= rough <= hi:
-            self.rough.append(here + rough)
+            self.rough.append((here + rough, across))
         if turn is not None:
             self.turns.append(turn)
         return measured
@@ -73,6 +77,15 @@ class WallTrack:
         return self.prior is not None and wall_readings_agree(
             self.readings, across, self.turn, here, self.min_measurements, self.agree_m, self.agree_per_m)
 
+    def rough_own(self, here: float, across: float) -> float | None:
+        """The wall's forward coordinate by a look's own latest rough readings, when they agree and lie within the
+        ceiling plus ``slack_m`` (None otherwise, and without a prior and a ceiling)."""
+        if self.prior is None or self.ceiling is None or not wall_readings_agree(
+                self.rough, across, self.turn, here, self.min_measurements, self.agree_m, self.agree_per_m):
+            return None
+        forward = wall_forward_at(self.rough[-self.min_measurements:], across, self.turn)
+        return forward if forward <= self.ceiling + self.slack_m else None
+
     def view(self, here: float, across: float) -> tuple[float | None, float | None]:
         """(distance, ahead) from ``here`` at ``across``: the wall's distance (None before ``min_measurements``
         readings), and the nearest it can be straight ahead (None before any bound is known)."""
@@ -86,9 +99,11 @@ class WallTrack:
                 distance = self.prior - here
         ahead = distance
         if ahead is None and len(self.rough) >= self.min_measurements:
-            ahead = float(np.median(self.rough[-self.min_measurements:])) - here
+            ahead = float(np.median([forward for forward, _ in self.rough[-self.min_measurements:]])) - here
         if self.prior is not None and not own:
-            ahead = self.prior - here if ahead is None else min(ahead, self.prior - here)
+            rough = self.rough_own(here, across)
+            bound = self.prior - here if rough is None else max(self.prior, rough) - here
+            ahead = bound if ahead is None else min(ahead, bound)
         return distance, ahead
 
     def fallback_distance(self, here: float) -> float | None:

@@ -212,7 +212,7 @@ def test_refused_with_another_opening_seen_it_looks_in_front_of_that_one_first(t
     mission.yaw = 0.0                                  # heading north: right is east
     looks = []
 
-    def servo(start, avoid=(), wall_prior=None, reach=None):
+    def servo(start, avoid=(), wall_prior=None, reach=None, wall_ceiling=None):
         looks.append((start, avoid, reach))
         if len(looks) == 1:                            # the first look: refused, another opening seen 0.4 m right
             raise Refusal("too small", (-0.7, -0.2), (0.4, -0.3))
@@ -344,6 +344,31 @@ def test_a_look_is_bounded_by_the_nearest_wall_any_earlier_look_allows():
     assert search_wall_bound([far_wrong], 0.0, turn, margin) > 3.5
     assert search_wall_bound([far_wrong, (3.0, -0.5, None)], 0.0, turn, margin) == pytest.approx(
         3.0 - 0.5 * math.tan(turn))
+
+
+def test_a_looks_ceiling_is_the_furthest_the_wall_can_be_by_every_earlier_sight():
+    """companion.search.search_wall_ceiling: the bound's other side, turned the other way; of several looks, the
+    furthest counts."""
+    import math
+
+    from companion.search import search_wall_bound, search_wall_ceiling
+
+    turn, margin = math.radians(25.0), math.radians(8.0)
+    assert search_wall_ceiling([], 1.0, turn, margin) is None
+    unturned = [(3.0, 0.0, None)]
+    for right in (1.0, -1.0):
+        assert search_wall_ceiling(unturned, right, turn, margin) == pytest.approx(3.0 + math.tan(turn))
+    turned = [(3.0, 0.0, math.radians(10.0))]
+    assert search_wall_ceiling(turned, 1.0, turn, margin) == pytest.approx(
+        3.0 + math.tan(math.radians(10.0)) + math.tan(margin))
+    assert search_wall_ceiling(turned, -1.0, turn, margin) == pytest.approx(
+        3.0 - math.tan(math.radians(10.0)) + math.tan(margin))
+    # never nearer than the bound, and the same where the look is at the sight's own place
+    for walls in (unturned, turned, [(3.0, -3.0, math.radians(20.0)), (3.0, -0.5, None)]):
+        for right in (-2.0, 0.0, 1.5):
+            assert search_wall_ceiling(walls, right, turn, margin) >= search_wall_bound(walls, right, turn, margin)
+    assert search_wall_ceiling(unturned, 0.0, turn, margin) == pytest.approx(3.0)
+    assert search_wall_ceiling([(3.0, 0.0, None), (2.5, -0.5, None)], 0.0, turn, margin) == pytest.approx(3.0)
 
 
 def _look_by_the_image(tmp_path, detector, match: str | None = None) -> RecordingLink:

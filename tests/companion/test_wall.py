@@ -59,6 +59,30 @@ def test_a_looks_readings_beyond_its_prior_are_not_believed_unless_they_agree():
     assert WallTrack().own(0.0, 0.0) is False           # the first look has no prior to overrule
 
 
+def test_a_looks_own_rough_readings_lift_its_prior_when_they_agree_within_the_ceiling():
+    """hard world seeds 67 and 68: bounds allowing for a 25° turn held blind looks 1.5 m across short of the
+    wall, where they saw nothing and refused."""
+    def blind(readings, ceiling=3.4, prior=2.0):
+        wall = WallTrack(prior=prior, ceiling=ceiling)
+        for here, reading in zip((0.0, 0.2, 0.4), readings, strict=True):
+            wall.add(here, 0.0, None, reading, None)     # no gap in view: rough readings only
+        return wall
+    # the wall steadily 3.0 m along: ahead is it, beyond the prior (2.0), within the ceiling
+    steady = blind((3.0, 2.8, 2.6))
+    assert steady.rough_own(0.4, 0.0) == pytest.approx(3.0)
+    assert steady.view(0.4, 0.0) == (None, pytest.approx(2.6))
+    # readings that jump are not the wall: held to the prior
+    assert blind((3.0, 3.6, 2.6)).view(0.4, 0.0) == (None, pytest.approx(1.6))
+    # steady, but beyond the ceiling plus the slack (what lies behind a wall's end): held to the prior
+    assert blind((3.0, 2.8, 2.6), ceiling=2.6).rough_own(0.4, 0.0) is None
+    assert blind((3.0, 2.8, 2.6), ceiling=2.6).view(0.4, 0.0) == (None, pytest.approx(1.6))
+    assert blind((3.0, 2.8, 2.6), ceiling=2.7).view(0.4, 0.0) == (None, pytest.approx(2.6))   # within the slack
+    # nearer than the prior: the readings stand (the bound never lifts the wall further than they say)
+    assert blind((2.0, 1.8, 1.6), prior=2.5).view(0.4, 0.0) == (None, pytest.approx(1.6))
+    # without a ceiling (the first look, or no earlier sight) nothing changes
+    assert blind((3.0, 2.8, 2.6), ceiling=None).view(0.4, 0.0) == (None, pytest.approx(1.6))
+
+
 def test_the_far_surface_counts_only_beyond_the_pairs_own_wall_reading():
     wall = WallTrack()
     wall.add_far(0.0, 4.0, 2.0)
