@@ -9,6 +9,19 @@ from __future__ import annotations
 import math
 
 
+def _wall_limit(sight: tuple, right: float, turn_rad: float, yaw_margin_rad: float, side: float) -> float:
+    """Where one sight of the wall (forward, right, measured turn or None) allows its face to be at ``right``:
+    the nearest (``side`` -1) or the furthest (+1), a turn of up to ``turn_rad`` either way allowed for, or, the
+    turn measured, that turn give or take ``yaw_margin_rad``."""
+    wall_forward, wall_right, wall_yaw = sight
+    across = right - wall_right
+    limit = wall_forward + side * abs(across) * math.tan(turn_rad)
+    if wall_yaw is None:
+        return limit
+    measured = wall_forward + across * math.tan(wall_yaw) + side * abs(across) * math.tan(yaw_margin_rad)
+    return max(limit, measured) if side < 0 else min(limit, measured)
+
+
 def search_wall_bound(walls: list[tuple], right: float, turn_rad: float, yaw_margin_rad: float) -> float | None:
     """The nearest the wall's face can be (forward coordinate) at ``right`` across the heading, by every look's
     last sight of it (forward, right, measured turn or None): a turned wall is nearer on one side (allowed for
@@ -16,28 +29,14 @@ def search_wall_bound(walls: list[tuple], right: float, turn_rad: float, yaw_mar
     end the flow shows only what is behind it (measured: a vehicle walked past a wall's end, then stepped
     sideways into it).  The nearest of the looks' bounds counts: one taken far across, or with a turn measured
     wrong, may put the wall too far (measured, hard world seed 41: a third look began 0.3 m from the wall)."""
-    bounds = []
-    for wall_forward, wall_right, wall_yaw in walls:
-        across = right - wall_right
-        bound = wall_forward - abs(across) * math.tan(turn_rad)
-        if wall_yaw is not None:
-            bound = max(bound, wall_forward + across * math.tan(wall_yaw) - abs(across) * math.tan(yaw_margin_rad))
-        bounds.append(bound)
-    return min(bounds) if bounds else None
+    return min((_wall_limit(w, right, turn_rad, yaw_margin_rad, -1.0) for w in walls), default=None)
 
 
 def search_wall_ceiling(walls: list[tuple], right: float, turn_rad: float, yaw_margin_rad: float) -> float | None:
     """The furthest the wall's face can be (forward coordinate) at ``right``, by the same sights as
     :func:`search_wall_bound` (turned the other way): what a look reads beyond it is what lies behind the wall's
     end, not the wall.  The furthest of the looks' ceilings counts."""
-    ceilings = []
-    for wall_forward, wall_right, wall_yaw in walls:
-        across = right - wall_right
-        ceiling = wall_forward + abs(across) * math.tan(turn_rad)
-        if wall_yaw is not None:
-            ceiling = min(ceiling, wall_forward + across * math.tan(wall_yaw) + abs(across) * math.tan(yaw_margin_rad))
-        ceilings.append(ceiling)
-    return max(ceilings) if ceilings else None
+    return max((_wall_limit(w, right, turn_rad, yaw_margin_rad, 1.0) for w in walls), default=None)
 
 
 def look_places(axis: float, shift: float, side: float, alternative: float | None = None) -> list[tuple[float, str]]:
