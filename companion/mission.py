@@ -92,8 +92,10 @@ class MissionConfig:
     search_move_timeout_s: float = 20.0  # wall (or lockstep) seconds to reach each point of the search
     search_wall_turn_rad: float = math.radians(25.0)  # a look allows for a wall turned this far (the hard world: 20°)
     search_yaw_margin_rad: float = math.radians(8.0)  # ... or, its turn measured, for that give or take this
-    search_reach_m: float = 1.2  # a look takes only openings this far across from where it looks from, and only
-                                 # seen clear in the frame it pushes on (no push on a tracked place alone)
+    search_reach_m: float = 1.6  # a look takes only openings this far across from where it looks from, and only
+                                 # seen clear in the frame it pushes on (no push on a tracked place alone); 1.2
+                                 # left openings 2.7-3.0 m across the start's axis to no look (hard world seeds
+                                 # 67 and 71: with 1.6, hard_1412974212 and hard_1694391472 through)
     search_walk_m: float = 1.0   # ... and starts this much further than the hold distance from it (room to walk
                                  # for parallax before the hold)
     search_wall_slack_m: float = 0.3  # ... and takes the wall no further than that bound plus this, ...
