@@ -4,7 +4,9 @@ Design (documented choice):
 
 * **Attitude**: the bias-corrected gyro is accumulated every physics step into a delta angle (the rate
   estimate for the rate loop is the per-step ``gyro - bias``) and the quaternion is rotated by the
-  accumulated delta angle whenever the attitude is consumed (attitude loop, KF prediction, correction).
+  accumulated delta angle whenever the attitude is consumed (attitude loop, KF prediction, correction);
+  telemetry reads it turned without storing it (:meth:`Estimator.attitude_now`), so that only simulated time
+  groups the sums.
   At each pose measurement (``pose_rate_hz``, mocap-like) a Mahony-style complementary correction
   pulls the estimate towards the measured attitude by a fraction ``att_gain`` of the small-angle
   error and integrates the same error into a gyro-bias estimate (``gyro_bias_gain``).
@@ -27,6 +29,17 @@ from filterpy.kalman import KalmanFilter
 from sitl_vehicle.airframes import GRAVITY
 from sitl_vehicle.control.qmath import qconj, qmul, qrotate
 from sitl_vehicle.sensors import SensorNoise
+
+
+def _rotated(q, da) -> tuple[float, float, float, float]:
+    """``q`` rotated by the body delta angle ``da`` (exact exponential map), normalised."""
+    ax, ay, az = da
+    ang = math.sqrt(ax * ax + ay * ay + az * az)
+    h = 0.5 * ang
+    k = math.sin(h) / ang
+    qw, qx, qy, qz = qmul(q, (math.cos(h), ax * k, ay * k, az * k))
+    n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+    return (qw * n, qx * n, qy * n, qz * n)
 
 
 class Estimator:
@@ -90,16 +103,20 @@ class Estimator:
     def propagate(self) -> None:
         """Rotate the attitude estimate by the accumulated delta angle (exact exponential map)."""
         da = self._dangle
-        ax, ay, az = da
-        if ax == 0.0 and ay == 0.0 and az == 0.0:
+        if da[0] == 0.0 and da[1] == 0.0 and da[2] == 0.0:
             return
+        self.q = _rotated(self.q, da)
         da[0] = da[1] = da[2] = 0.0
-        ang = math.sqrt(ax * ax + ay * ay + az * az)
-        h = 0.5 * ang
-        k = math.sin(h) / ang
-        qw, qx, qy, qz = qmul(self.q, (math.cos(h), ax * k, ay * k, az * k))
-        n = 1.0 / math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
-        self.q = (qw * n, qx * n, qy * n, qz * n)
+
+    def attitude_now(self) -> tuple[float, float, float, float]:
+        """The attitude with the accumulated delta angle applied, the estimator left as it is.  Reading the
+        estimate (telemetry, a heartbeat) must not regroup the gyro integration: when it did, a lockstep flight
+        depended on when the wall clock sent a ground station's heartbeat (measured: the same hard-world
+        flight twice, its attitude 5e-8 rad apart after 32 s, then different frames)."""
+        da = self._dangle
+        if da[0] == 0.0 and da[1] == 0.0 and da[2] == 0.0:
+            return self.q
+        return _rotated(self.q, da)
 
     def integrate_gyro(self, gyro, dt: float) -> None:
         """Gyro sample + immediate attitude propagation."""

@@ -206,8 +206,7 @@ class VehicleSim:
         e = self.estimator
         if e is None:
             return self.truth
-        e.propagate()
-        return VehicleState(e.position, e.velocity, e.q, e.omega)
+        return VehicleState(e.position, e.velocity, e.attitude_now(), e.omega)
 
     @property
     def estimate_valid(self) -> bool:

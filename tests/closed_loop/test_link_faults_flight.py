@@ -6,19 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from pymavlink import mavutil
 
+from tests.support.tlog import tlog_messages
 from tools.launch import launch
 from tools.link_faults import COMPANION_TO_VEHICLE, VEHICLE_TO_COMPANION, LinkFaults
-
-
-def _messages(tlog: Path) -> list[tuple]:
-    conn = mavutil.mavlink_connection(str(tlog))
-    out = []
-    while (msg := conn.recv_match()) is not None:
-        out.append((msg.get_type(), msg.get_srcSystem(), msg.get_seq()))
-    conn.close()
-    return out
 
 
 def _fly(run_dir: Path) -> dict:
@@ -39,6 +30,7 @@ def test_the_same_lossy_lockstep_flight_twice_is_identical(tmp_path):
         for key in ("wall_time_s", "run_dir", "storyboard"):
             verdict.pop(key, None)
     assert first == second
-    # what the companion received and sent, message by message (the tlog's own timestamps are wall time)
-    tlogs = [_messages(tmp_path / d / "companion" / "link.tlog") for d in ("first", "second")]
+    # what the companion received and sent, message by message, field by field (the tlog's own timestamps are
+    # wall time)
+    tlogs = [tlog_messages(tmp_path / d / "companion" / "link.tlog") for d in ("first", "second")]
     assert len(tlogs[0]) > 100 and tlogs[0] == tlogs[1]

@@ -67,6 +67,27 @@ def test_same_seed_same_estimate_different_seed_differs():
     assert run(11) != run(12)
 
 
+def test_reading_the_estimate_leaves_the_flight_as_it_was():
+    """Telemetry, a heartbeat or a status check reads the estimate at moments the wall clock can choose (a
+    ground station's heartbeat while lockstep holds time); the flight must not depend on them."""
+    def fly(reads_per_step: float) -> list[bytes]:
+        sim = VehicleSim(VehicleConfig(), rng=np.random.default_rng(7))
+        sim.set_armed(True)
+        readers = np.random.default_rng(1)
+        states = []
+        for target in ((0.0, 0.0, -1.5), (1.0, 0.3, -1.4)):
+            sim.set_setpoint(Setpoint(position=target))
+            for _ in range(400):
+                if readers.random() < reads_per_step:
+                    read = sim.estimate
+                    assert read.attitude == sim.estimate.attitude   # a second read sees the same
+                sim.step()
+                states.append(np.asarray(sim.dyn.x).tobytes() + np.asarray(sim.estimator.q).tobytes())
+        return states
+
+    assert fly(0.0) == fly(0.3)
+
+
 def test_kf_converges_from_wrong_initial_state_on_constant_velocity_track():
     noise = SensorNoise()
     rng = np.random.default_rng(5)
