@@ -365,6 +365,7 @@ class Mission:
                 "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
                 "centroid_raw": detection.centroid, "openings": len(found), "centroid_used": used,
                 "clear_radius_m": sight.clear_radius_m, "clearance_here_m": sight.clearance_here_m,
+                "judged_estimates": sight.judged_estimates,
                 "note": sight.note,
                 "attitude_est": attitude, "accepted": self.tracker.last_accepted,
                 "no_gap_reason": detection.reason, "area_frac": view.area_frac,

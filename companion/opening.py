@@ -91,6 +91,7 @@ class Sight:
     clearance_here_m: float | None = None  # from the heading's axis to the opening's nearest edge (this frame)
     sightings: int = 0              # how many frames placed the tracked opening where it is tracked ...
     close_sightings: int = 0        # ... of them with the wall within decide_within_m
+    judged_estimates: int = 0       # its size estimates taken in front of it, near (what judges it: see observe)
     note: str | None = None         # a choice or a switch, said once
     refusal: str | None = None      # why the vehicle will not fly through (then it must not)
 
@@ -318,7 +319,7 @@ class OpeningTracker:
             here = self.clear_radius_m(edge_distance_px(mask, (axis[0] * stretch, axis[1])), wall_distance_m,
                                        focal_px) if chosen[0].detection.mask.any() else 0.0
         return Sight(chosen[0].detection if chosen is not None else None, used, offset, steady, here,
-                     len(self.places), self.close_places, note, refusal)
+                     len(self.places), self.close_places, len(self.close_radii), note, refusal)
 
     def _remember(self, placed: list[tuple[Candidate, Point]], wall_distance_m: float, focal_px: float,
                   radius_px) -> None:
