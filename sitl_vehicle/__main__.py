@@ -11,11 +11,12 @@ import threading
 from pathlib import Path
 
 from sitl_vehicle.airframes import AIRFRAMES
-from sitl_vehicle.mavlink_io import Home, PortInUseError, parse_hostport
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterError
 from sitl_vehicle.server import ServerConfig, VehicleServer
 from sitl_vehicle.signing import SigningKeyError
 from sitl_vehicle.sim import VehicleConfig
+from sitl_vehicle.telemetry import Home
+from sitl_vehicle.udp_link import PortInUseError, parse_hostport
 
 log = logging.getLogger("flowgap-vehicle")
 

@@ -23,9 +23,11 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl_vehicle.commander import Commander, VehicleStatus
 from sitl_vehicle.link_signing import LinkSigning
 from sitl_vehicle.lockstep import LockstepHold
-from sitl_vehicle.mavlink_io import Home, MavlinkVehicleInterface, Telemetry, UdpLink, truth_odometry
+from sitl_vehicle.mavlink_io import MavlinkVehicleInterface
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore, apply_binding, bound_specs
 from sitl_vehicle.sim import VehicleConfig, VehicleSim
+from sitl_vehicle.telemetry import Home, Telemetry, truth_odometry
+from sitl_vehicle.udp_link import UdpLink
 
 log = logging.getLogger(__name__)
 
