@@ -4,6 +4,11 @@ The commander owns no clock and no sockets. The MAVLink edge calls its request m
 arrive and ``update`` once per control tick with the vehicle's status; it answers with a ``Reply``
 (a MAV_RESULT plus the reason PX4 would print) and, from ``update``, the armed state and setpoint the
 vehicle core must fly. STATUSTEXT lines it wants sent are queued in ``messages``.
+
+Three parts have modules of their own, mixed into :class:`Commander`: the link-loss failsafes and the
+pilot's stick takeover (``sitl_vehicle.failsafes``), Return's legs and a mission's items
+(``sitl_vehicle.navigator``) and the stick modes' setpoints (``sitl_vehicle.stick_modes``). Their constants
+are importable from here too, as before the split.
 """
 
 from __future__ import annotations
@@ -15,47 +20,51 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.manual import (
-    ShapedSticks,
-    Sticks,
-    StickShape,
-    shape_sticks,
-    stick_acceleration,
-    stick_climb_velocity,
-    stick_velocity,
+from sitl_vehicle.failsafes import (
+    AUTO_MODES,
+    DLL_ACTIONS,
+    DLL_STOP_MOTORS,
+    FAIL_ACT_T_MIN,
+    FAILSAFE_SEVERITY,
+    LOSS_EXCEPTION_BIT,
+    OBL_ACTION_LAND,
+    OBL_ACTION_RETURN,
+    RC_OVERRIDE_AUTO,
+    RC_OVERRIDE_OFFBOARD,
+    STICK_MOVE_WINDOW_S,
+    Failsafes,
 )
-from sitl_vehicle.mission import NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, MissionItem
+from sitl_vehicle.manual import Sticks
+from sitl_vehicle.mission import MissionItem
 from sitl_vehicle.modes import FlightMode
+from sitl_vehicle.navigator import (
+    MIS_CLIMB,
+    MIS_DONE,
+    MIS_FLY,
+    MIS_HOLD,
+    MIS_LAND,
+    RTL_CLIMB,
+    RTL_DESCEND,
+    RTL_LAND,
+    RTL_LOITER,
+    RTL_RETURN,
+    Navigator,
+)
 from sitl_vehicle.params import ParameterStore
 from sitl_vehicle.sim import AttitudeSetpoint, Setpoint
+from sitl_vehicle.stick_modes import StickModes, stopping_point
+
+__all__ = [
+    "ACCEPTED", "ARM_THROTTLE_LOW", "ARM_THROTTLE_MAX", "AUTO_MODES", "DLL_ACTIONS", "DLL_STOP_MOTORS",
+    "FAIL_ACT_T_MIN", "FAILSAFE_SEVERITY", "LOSS_EXCEPTION_BIT", "MIS_CLIMB", "MIS_DONE", "MIS_FLY", "MIS_HOLD",
+    "MIS_LAND", "NAN", "OBL_ACTION_LAND", "OBL_ACTION_RETURN", "RC_OVERRIDE_AUTO", "RC_OVERRIDE_OFFBOARD", "RTL_CLIMB",
+    "RTL_DESCEND", "RTL_LAND", "RTL_LOITER", "RTL_RETURN", "STICK_MOVE_WINDOW_S", "TAKEOFF_ALT_SILENT_MARGIN",
+    "Commander", "CommanderOutput", "Reply", "VehicleStatus",
+]
 
 log = logging.getLogger(__name__)
 NAN = math.nan
 
-# COM_OBL_RC_ACT values for Return and Land; the others (PX4: Position, Altitude, Manual, which need a pilot
-# on the sticks) hold position
-OBL_ACTION_RETURN = 3
-OBL_ACTION_LAND = 4
-# NAV_DLL_ACT (ground-station link loss) and NAV_RCL_ACT (manual control loss) values: 0 none, 1 Hold,
-# 2 Return, 3 Land, 5 terminate, 6 disarm
-DLL_ACTIONS = {1: FlightMode.AUTO_LOITER, 2: FlightMode.AUTO_RTL, 3: FlightMode.AUTO_LAND}
-DLL_STOP_MOTORS = (5, 6)
-# COM_RCL_EXCEPT / COM_DLL_EXCEPT bits (PX4's link-loss exceptions): 1 Mission, 2 the other auto modes (Hold,
-# Takeoff, Land, Return), 4 Offboard; a loss in an excepted mode is only reported. The stick modes need the
-# sticks and are never excepted.
-LOSS_EXCEPTION_BIT = {FlightMode.AUTO_MISSION: 1, FlightMode.AUTO_LOITER: 2, FlightMode.AUTO_TAKEOFF: 2,
-                      FlightMode.AUTO_LAND: 2, FlightMode.AUTO_RTL: 2, FlightMode.OFFBOARD: 4}
-# PX4 ranks failsafe actions so that of two at once the worse wins: Hold < Return < Land
-FAILSAFE_SEVERITY = {FlightMode.AUTO_LOITER: 0, FlightMode.AUTO_RTL: 1, FlightMode.AUTO_LAND: 2}
-# COM_FAIL_ACT_T at or below this acts at once, as PX4 does
-FAIL_ACT_T_MIN = 0.1
-# COM_RC_OVERRIDE bits: moving the sticks takes over (switches to Position) in the auto modes, in Offboard
-RC_OVERRIDE_AUTO, RC_OVERRIDE_OFFBOARD = 1, 2
-AUTO_MODES = (FlightMode.AUTO_MISSION, FlightMode.AUTO_LOITER, FlightMode.AUTO_TAKEOFF, FlightMode.AUTO_LAND,
-              FlightMode.AUTO_RTL)
-# the sticks "move" when an axis (throttle counted double: its range is half) changed by COM_RC_STICK_OV
-# within this window: a quick push, not a slow drift or jitter (PX4 thresholds a smoothed stick rate)
-STICK_MOVE_WINDOW_S = 1.0
 # PX4 raises a takeoff altitude below MIS_TAKEOFF_ALT silently when it is short by less than this (Navigator:
 # "don't complain if difference is smaller than 10cm")
 TAKEOFF_ALT_SILENT_MARGIN = 0.1
@@ -63,12 +72,6 @@ TAKEOFF_ALT_SILENT_MARGIN = 0.1
 # Stabilized or Manual mode unless the throttle is low
 ARM_THROTTLE_MAX = 0.6
 ARM_THROTTLE_LOW = 0.2
-
-# Return mode's legs, in order (PX4's RTL: climb, fly home at the return altitude, descend, wait, land)
-RTL_CLIMB, RTL_RETURN, RTL_DESCEND, RTL_LOITER, RTL_LAND = "climb", "return", "descend", "loiter", "land"
-# Mission mode's phases within an item: climb (a Takeoff item, or the climb PX4 adds before a first waypoint
-# when started on the ground), fly to the item, hold there, land; done: holding at the last item
-MIS_CLIMB, MIS_FLY, MIS_HOLD, MIS_LAND, MIS_DONE = "climb", "fly", "hold", "land", "done"
 
 
 @dataclass(frozen=True)
@@ -106,7 +109,7 @@ class CommanderOutput:
     mode: FlightMode
 
 
-class Commander:
+class Commander(Failsafes, Navigator, StickModes):
     """PX4-like commander/navigator for Takeoff, Hold, Land, Return, Mission (``set_mission``), Offboard, and
     the stick modes Position, Altitude, Stabilized and Manual (``manual_control``).
 
@@ -394,64 +397,13 @@ class Commander:
             return self._mission_phase != MIS_LAND
         return self.mode is FlightMode.AUTO_LOITER and self._hold_target is not None and self._has_flown
 
-    def _stick_shape(self) -> StickShape:
-        p = self.params
-        optional = {field: p[name] for name, field in (("MPC_Z_VEL_MAX_UP", "vel_up_max"),
-                                                       ("MPC_Z_VEL_MAX_DN", "vel_down_max")) if name in p}
-        return StickShape(deadzone=p["MPC_HOLD_DZ"], xy_expo=p["MPC_XY_MAN_EXPO"], z_expo=p["MPC_Z_MAN_EXPO"],
-                          yaw_expo=p["MPC_YAW_EXPO"], vel_xy_max=p["MPC_VEL_MANUAL"],
-                          yaw_rate_max=math.radians(p["MPC_MAN_Y_MAX"]), tilt_max=math.radians(p["MPC_MAN_TILT_MAX"]),
-                          **optional)
-
-    def _shaped_sticks(self) -> ShapedSticks:
-        return shape_sticks(self._sticks or Sticks(), self._stick_shape())
-
-    def _stick_setpoint(self, status: VehicleStatus) -> Setpoint | AttitudeSetpoint:
-        """The sticks' setpoint. Stabilized/Manual: roll and pitch angles up to MPC_MAN_TILT_MAX, a yaw rate and
-        the throttle as they are. Position/Altitude: a centred stick holds what it controls: the altitude
-        (throttle), the heading (yaw) and, in Position mode, the position where the vehicle stops."""
-        shape = self._stick_shape()
-        sticks = shape_sticks(self._sticks, shape)
-        if self.mode.attitude_from_sticks:  # forward stick pitches the nose down (negative pitch, FRD)
-            return AttitudeSetpoint(roll=sticks.right * shape.tilt_max, pitch=-sticks.forward * shape.tilt_max,
-                                    yaw_rate=sticks.yaw * shape.yaw_rate_max, throttle=self._sticks.throttle)
-        if sticks.yaw != 0.0:
-            self._stick_yawing = True
-            yaw, yaw_rate = NAN, sticks.yaw * shape.yaw_rate_max
-        else:
-            if self._stick_yawing:
-                self._stick_yawing = False
-                self._hold_yaw = status.yaw
-            yaw, yaw_rate = self._hold_yaw, NAN
-        stop = None
-        if sticks.up != 0.0:
-            self._stick_hold_z = None
-            z, vd = NAN, stick_climb_velocity(sticks, shape)
-        else:
-            if self._stick_hold_z is None:
-                stop = _stopping_point(status.position, status.velocity)
-                self._stick_hold_z = stop[2]
-            z, vd = self._stick_hold_z, NAN
-        if self.mode is FlightMode.ALTCTL:
-            an, ae = stick_acceleration(sticks, shape, status.yaw)
-            return Setpoint(position=(NAN, NAN, z), velocity=(NAN, NAN, vd), acceleration=(an, ae, NAN), yaw=yaw,
-                            yaw_rate=yaw_rate)
-        if not sticks.horizontal_centred:
-            self._stick_hold_xy = None
-            vn, ve = stick_velocity(sticks, shape, status.yaw)
-            return Setpoint(position=(NAN, NAN, z), velocity=(vn, ve, vd), yaw=yaw, yaw_rate=yaw_rate)
-        if self._stick_hold_xy is None:
-            stop = stop or _stopping_point(status.position, status.velocity)
-            self._stick_hold_xy = (stop[0], stop[1])
-        return Setpoint(position=(*self._stick_hold_xy, z), velocity=(NAN, NAN, vd), yaw=yaw, yaw_rate=yaw_rate)
-
     def _enter(self, mode: FlightMode, status: VehicleStatus) -> None:
         if mode is not self.mode:
             log.info("mode %s -> %s", self.mode.label, mode.label)
         self.mode = mode
         self._hold_yaw = status.yaw
         if mode is FlightMode.AUTO_LOITER:
-            self._hold_target = _stopping_point(status.position, status.velocity)
+            self._hold_target = stopping_point(status.position, status.velocity)
         elif mode is FlightMode.AUTO_LAND:
             self._land_xy = status.position[:2]
         elif mode is FlightMode.AUTO_MISSION:
@@ -468,107 +420,6 @@ class Commander:
             self._rtl_z = min(status.position[2], self.home[2] - self.params["RTL_RETURN_ALT"])  # NED: up is -z
             self._say(mavlink.MAV_SEVERITY_INFO, f"Return: flying home at {self.home[2] - self._rtl_z:.1f} m "
                                                  "above home")
-
-    def _descend_z(self) -> float:
-        return max(self._rtl_z, self.home[2] - self.params["RTL_DESCEND_ALT"])  # descending never climbs
-
-    def _return_target(self) -> tuple[float, float, float]:
-        hx, hy, _ = self.home
-        if self._rtl_leg == RTL_CLIMB:
-            return (*self._rtl_start_xy, self._rtl_z)
-        if self._rtl_leg == RTL_RETURN:
-            return (hx, hy, self._rtl_z)
-        return (hx, hy, self._descend_z())
-
-    def _advance_return(self, status: VehicleStatus) -> None:
-        """Move to Return's next leg once the current one's target is reached (within NAV_ACC_RAD)."""
-        x, y, z = status.position
-        reached = self.params["NAV_ACC_RAD"]
-        hx, hy, _ = self.home
-        if self._rtl_leg == RTL_CLIMB and abs(z - self._rtl_z) <= reached:
-            self._rtl_leg = RTL_RETURN
-        if self._rtl_leg == RTL_RETURN and math.hypot(x - hx, y - hy) <= reached:
-            self._rtl_leg = RTL_DESCEND
-        if self._rtl_leg == RTL_DESCEND and abs(z - self._descend_z()) <= reached:
-            self._rtl_leg = RTL_LOITER
-            self._rtl_loiter_since = status.time_s
-        if self._rtl_leg == RTL_LOITER:
-            delay = self.params["RTL_LAND_DELAY"]
-            if delay >= 0 and status.time_s - self._rtl_loiter_since >= delay:
-                self._rtl_leg = RTL_LAND
-                self._land_xy = (hx, hy)
-                self._say(mavlink.MAV_SEVERITY_INFO, "Return: landing at home")
-
-    def _begin_mission_item(self, status: VehicleStatus) -> None:
-        item = self.mission[self.mission_seq]
-        x, y, z = status.position
-        if item.command == NAV_RETURN_TO_LAUNCH:
-            self._mission_item_reached(status)
-            if status.landed:  # nothing to return from: the mission ends here
-                self._mission_phase, self._mission_complete = MIS_LAND, True
-            elif self.mode is FlightMode.AUTO_MISSION:  # unless the mission changed mode already
-                self._enter(FlightMode.AUTO_RTL, status)
-            return
-        if math.isfinite(item.yaw):
-            self._hold_yaw = item.yaw
-        has_xy = math.isfinite(item.north)
-        tx, ty = (item.north, item.east) if has_xy else (x, y)
-        self._mission_since = status.time_s
-        if item.command == NAV_LAND:
-            self._mission_target = (tx, ty, z)
-            self._mission_phase = MIS_FLY if has_xy else MIS_LAND
-            self._land_xy = (tx, ty)
-            return
-        tz = item.down(self.home[2])
-        if item.command == NAV_TAKEOFF or status.landed:
-            # PX4 climbs where it is first: a Takeoff item, or any first item flown from the ground
-            self._mission_target = (x, y, tz)
-            self._mission_phase = MIS_CLIMB
-            return
-        self._mission_target = (tx, ty, tz)
-        self._mission_phase = MIS_FLY
-
-    def _advance_mission(self, status: VehicleStatus) -> None:
-        """Move through the mission's items as PX4's navigator does (see MIS_* phases)."""
-        if not self.mission:
-            return
-        item = self.mission[self.mission_seq]
-        phase = self._mission_phase
-        now = status.time_s
-        reach = self.params["NAV_ACC_RAD"]
-        if phase == MIS_CLIMB and abs(status.position[2] - self._mission_target[2]) <= reach:
-            if item.command == NAV_TAKEOFF:
-                self._next_mission_item(status)
-            else:  # the climb before a waypoint: now fly to it
-                self._mission_target = (item.north, item.east, self._mission_target[2])
-                self._mission_phase = MIS_FLY
-        elif phase == MIS_FLY and math.dist(status.position, self._mission_target) <= max(reach,
-                                                                                          item.acceptance_radius):
-            if item.command == NAV_LAND:
-                self._mission_phase = MIS_LAND
-            elif item.hold_s > 0:
-                self._mission_item_reached(status)
-                self._mission_phase, self._mission_since = MIS_HOLD, now
-            else:
-                self._next_mission_item(status, reached=True)
-        elif phase == MIS_HOLD and now - self._mission_since >= item.hold_s:
-            self._next_mission_item(status)
-        elif phase == MIS_LAND and status.landed and not self._mission_complete:
-            self._mission_item_reached(status)
-            self._mission_complete = True  # still landing: the thrust winds down and the vehicle disarms
-            self._say(mavlink.MAV_SEVERITY_INFO, "Mission finished, landed")
-
-    def _next_mission_item(self, status: VehicleStatus, reached: bool = False) -> None:
-        item = self.mission[self.mission_seq]
-        if reached or item.command == NAV_TAKEOFF:
-            self._mission_item_reached(status)
-        if self.mission_seq + 1 < len(self.mission):
-            self.mission_seq += 1
-            self._begin_mission_item(status)
-        else:
-            self._mission_phase = MIS_DONE  # PX4 holds at the last item, still in Mission mode
-            self._mission_complete = True
-            self._say(mavlink.MAV_SEVERITY_INFO, "Mission finished, loitering")
 
     def _mission_item_reached(self, status: VehicleStatus) -> None:
         self.mission_reached.append(self.mission_seq)
@@ -593,104 +444,6 @@ class Commander:
             delay = self.params["COM_DISARM_PRFLT"]
             if delay >= 0 and now - self._armed_at >= delay and self.mode is not FlightMode.AUTO_TAKEOFF:
                 self._disarm("Disarmed: no takeoff after arming")
-
-    def _offboard_lost(self, status: VehicleStatus) -> None:
-        action = int(self.params["COM_OBL_RC_ACT"])
-        target = {OBL_ACTION_LAND: FlightMode.AUTO_LAND, OBL_ACTION_RETURN: FlightMode.AUTO_RTL}.get(
-            action, FlightMode.AUTO_LOITER)
-        self._fail_safe("offboard", target, status)
-
-    def _note_stick_movement(self, sticks: Sticks, time_s: float) -> None:
-        """Flag a takeover request when an axis moved by COM_RC_STICK_OV (percent of its range) within
-        STICK_MOVE_WINDOW_S."""
-        recent = self._recent_sticks
-        while recent and time_s - recent[0][0] > STICK_MOVE_WINDOW_S:
-            recent.popleft()
-        threshold = 0.01 * self.params["COM_RC_STICK_OV"]
-        for _, old in recent:
-            if max(abs(sticks.pitch - old.pitch), abs(sticks.roll - old.roll), abs(sticks.yaw - old.yaw),
-                   2.0 * abs(sticks.throttle - old.throttle)) > threshold:
-                self._sticks_moved = True
-                recent.clear()  # one push, one request
-                break
-        recent.append((time_s, sticks))
-
-    def _stick_takeover_allowed(self) -> bool:
-        """PX4's stick takeover: in the auto modes or Offboard as COM_RC_OVERRIDE allows, and from a failsafe's
-        Hold, Return or Land: offboard loss's at once, a link loss's once its COM_FAIL_ACT_T delay is over
-        (during it, only a mode choice takes over; with no delay configured, never)."""
-        if self.failsafe and self.mode in (FlightMode.AUTO_LOITER, FlightMode.AUTO_RTL, FlightMode.AUTO_LAND):
-            return self._delayed_failsafe is None and self._failsafe_stick_takeover
-        bits = int(self.params["COM_RC_OVERRIDE"])
-        return bool((bits & RC_OVERRIDE_AUTO and self.mode in AUTO_MODES)
-                    or (bits & RC_OVERRIDE_OFFBOARD and self.mode is FlightMode.OFFBOARD))
-
-    def _loss_excepted(self, param: str) -> bool:
-        """Whether the link-loss exception mask ``param`` (COM_RCL_EXCEPT, COM_DLL_EXCEPT) covers this mode."""
-        return bool(int(self.params[param]) & LOSS_EXCEPTION_BIT.get(self.mode, 0))
-
-    def _manual_control_failsafe(self, status: VehicleStatus) -> None:
-        """PX4's manual-control-loss failsafe (NAV_RCL_ACT): once per loss, in any mode COM_RCL_EXCEPT does not
-        except, and not when the vehicle was armed without sticks."""
-        self._manual_failsafe_done = True
-        action = int(self.params["NAV_RCL_ACT"])
-        self._fail_safe("manual control", None if action in DLL_STOP_MOTORS
-                        else DLL_ACTIONS.get(action, FlightMode.AUTO_LOITER), status, delayed=True)
-
-    def _data_link_failsafe(self, status: VehicleStatus) -> None:
-        """PX4's data-link-loss failsafe (NAV_DLL_ACT): once a ground station had connected, once per loss, in
-        the air, in any mode but Land that COM_DLL_EXCEPT does not except."""
-        self._gcs_failsafe_done = True
-        action = int(self.params["NAV_DLL_ACT"])
-        if action in DLL_ACTIONS or action in DLL_STOP_MOTORS:
-            self._fail_safe("data link", None if action in DLL_STOP_MOTORS else DLL_ACTIONS[action], status,
-                            delayed=True)
-
-    def _fail_safe(self, lost: str, target: FlightMode | None, status: VehicleStatus,
-                   delayed: bool = False) -> None:
-        """Act on the loss of ``lost``: switch to ``target`` (Hold instead of Return on the ground), or stop
-        the motors when ``target`` is None. Already in ``target``, or landing when ``target`` is Return, the
-        vehicle carries on (PX4 does not restart a Return, nor turn a landing into one).
-
-        ``delayed`` (the link losses): as PX4 does, the vehicle first holds for COM_FAIL_ACT_T, so that the
-        pilot can choose a mode instead, then switches; a loss during that delay keeps its deadline and the
-        worse action. Stopping the motors never waits."""
-        self.failsafe = True
-        self._failsafe_stick_takeover = not delayed or self.params["COM_FAIL_ACT_T"] > FAIL_ACT_T_MIN
-        if target is None:
-            self._delayed_failsafe = None
-            self._disarm(f"Failsafe: {lost} lost, motors stopped")
-            return
-        target = _hold_if_landed(target, status)
-        pending = self._delayed_failsafe
-        if pending is not None:
-            worse = max(target, pending[0], key=FAILSAFE_SEVERITY.__getitem__)
-            self._delayed_failsafe = (worse, pending[1])
-            self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {worse.label} in "
-                                                     f"{max(pending[1] - status.time_s, 0.0):.0f} s")
-            return
-        if target is self.mode or (target is FlightMode.AUTO_RTL and self.mode is FlightMode.AUTO_LAND):
-            self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, continuing {self.mode.label}")
-            return
-        wait = self.params["COM_FAIL_ACT_T"] if delayed else 0.0
-        if wait > FAIL_ACT_T_MIN and target is not FlightMode.AUTO_LOITER:
-            self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {target.label} in "
-                                                     f"{wait:.0f} s (Hold until then)")
-            self._delayed_failsafe = (target, status.time_s + wait)
-            if self.mode is not FlightMode.AUTO_LOITER:
-                self._enter(FlightMode.AUTO_LOITER, status)
-            return
-        self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {target.label}")
-        self._enter(target, status)
-
-    def _delayed_failsafe_due(self, status: VehicleStatus) -> None:
-        """COM_FAIL_ACT_T is over and no mode was chosen meanwhile: the failsafe's action, even if the link
-        came back meanwhile (PX4 clears a Return or a Land only on a mode change)."""
-        target = _hold_if_landed(self._delayed_failsafe[0], status)
-        self._delayed_failsafe = None
-        if target is not self.mode:
-            self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: switching to {target.label}")
-            self._enter(target, status)
 
     def _offboard_alive(self, now: float) -> bool:
         return now - self._offboard_time <= self.params["COM_OF_LOSS_T"]
@@ -733,13 +486,3 @@ class Commander:
     def _say(self, severity: int, text: str) -> None:
         log.info("%s", text)
         self.messages.append((severity, text))
-
-
-def _hold_if_landed(target: FlightMode, status: VehicleStatus) -> FlightMode:
-    """A failsafe's mode: Hold instead of Return on the ground (there is nothing to return from)."""
-    return FlightMode.AUTO_LOITER if target is FlightMode.AUTO_RTL and status.landed else target
-
-
-def _stopping_point(position, velocity, decel: float = 2.0) -> tuple[float, float, float]:
-    """Where the vehicle comes to rest braking at ``decel`` m/s² — PX4's Hold stops, it does not go back."""
-    return tuple(p + v * abs(v) / (2.0 * decel) for p, v in zip(position, velocity, strict=True))

@@ -56,7 +56,7 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "sitl_vehicle.estimator": (["sitl_vehicle/estimator.py"], ["tests/sitl_vehicle/test_estimator.py"]),
     "sitl_vehicle.dynamics": (["sitl_vehicle/dynamics.py"],
                               ["tests/sitl_vehicle/test_dynamics.py", "tests/sitl_vehicle/test_wind.py"]),
-    "sitl_vehicle.commander": (["sitl_vehicle/commander.py"],
+    "sitl_vehicle.commander": ([f"sitl_vehicle/{m}.py" for m in ("commander", "failsafes", "navigator", "stick_modes")],
                                [f"tests/sitl_vehicle/test_{t}.py" for t in ("commander", "takeoff", "mission",
                                                                             "manual")]),
 }

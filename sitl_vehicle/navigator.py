@@ -1,0 +1,132 @@
+"""Navigator: how Return and Mission mode fly, leg by leg and item by item, as PX4's navigator does.
+
+:class:`Navigator` is a mixin of :class:`sitl_vehicle.commander.Commander` (it reads and sets the commander's
+state and calls its ``_enter``, ``_say`` and ``_mission_item_reached``): Return's legs (climb, fly home, descend,
+wait, land) and a mission's items (climb, fly, hold, land) with the targets the commander's setpoint flies.
+Apart from the commander because the commander chooses the mode and this flies it: it never changes mode but
+to hand a mission's Return item to Return mode.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_vehicle.mission import NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF
+from sitl_vehicle.modes import FlightMode
+
+if TYPE_CHECKING:
+    from sitl_vehicle.commander import VehicleStatus
+
+# Return mode's legs, in order (PX4's RTL: climb, fly home at the return altitude, descend, wait, land)
+RTL_CLIMB, RTL_RETURN, RTL_DESCEND, RTL_LOITER, RTL_LAND = "climb", "return", "descend", "loiter", "land"
+# Mission mode's phases within an item: climb (a Takeoff item, or the climb PX4 adds before a first waypoint
+# when started on the ground), fly to the item, hold there, land; done: holding at the last item
+MIS_CLIMB, MIS_FLY, MIS_HOLD, MIS_LAND, MIS_DONE = "climb", "fly", "hold", "land", "done"
+
+
+class Navigator:
+    """Return's legs and a mission's items, mixed into ``Commander``."""
+
+    def _descend_z(self) -> float:
+        return max(self._rtl_z, self.home[2] - self.params["RTL_DESCEND_ALT"])  # descending never climbs
+
+    def _return_target(self) -> tuple[float, float, float]:
+        hx, hy, _ = self.home
+        if self._rtl_leg == RTL_CLIMB:
+            return (*self._rtl_start_xy, self._rtl_z)
+        if self._rtl_leg == RTL_RETURN:
+            return (hx, hy, self._rtl_z)
+        return (hx, hy, self._descend_z())
+
+    def _advance_return(self, status: VehicleStatus) -> None:
+        """Move to Return's next leg once the current one's target is reached (within NAV_ACC_RAD)."""
+        x, y, z = status.position
+        reached = self.params["NAV_ACC_RAD"]
+        hx, hy, _ = self.home
+        if self._rtl_leg == RTL_CLIMB and abs(z - self._rtl_z) <= reached:
+            self._rtl_leg = RTL_RETURN
+        if self._rtl_leg == RTL_RETURN and math.hypot(x - hx, y - hy) <= reached:
+            self._rtl_leg = RTL_DESCEND
+        if self._rtl_leg == RTL_DESCEND and abs(z - self._descend_z()) <= reached:
+            self._rtl_leg = RTL_LOITER
+            self._rtl_loiter_since = status.time_s
+        if self._rtl_leg == RTL_LOITER:
+            delay = self.params["RTL_LAND_DELAY"]
+            if delay >= 0 and status.time_s - self._rtl_loiter_since >= delay:
+                self._rtl_leg = RTL_LAND
+                self._land_xy = (hx, hy)
+                self._say(mavlink.MAV_SEVERITY_INFO, "Return: landing at home")
+
+    def _begin_mission_item(self, status: VehicleStatus) -> None:
+        item = self.mission[self.mission_seq]
+        x, y, z = status.position
+        if item.command == NAV_RETURN_TO_LAUNCH:
+            self._mission_item_reached(status)
+            if status.landed:  # nothing to return from: the mission ends here
+                self._mission_phase, self._mission_complete = MIS_LAND, True
+            elif self.mode is FlightMode.AUTO_MISSION:  # unless the mission changed mode already
+                self._enter(FlightMode.AUTO_RTL, status)
+            return
+        if math.isfinite(item.yaw):
+            self._hold_yaw = item.yaw
+        has_xy = math.isfinite(item.north)
+        tx, ty = (item.north, item.east) if has_xy else (x, y)
+        self._mission_since = status.time_s
+        if item.command == NAV_LAND:
+            self._mission_target = (tx, ty, z)
+            self._mission_phase = MIS_FLY if has_xy else MIS_LAND
+            self._land_xy = (tx, ty)
+            return
+        tz = item.down(self.home[2])
+        if item.command == NAV_TAKEOFF or status.landed:
+            # PX4 climbs where it is first: a Takeoff item, or any first item flown from the ground
+            self._mission_target = (x, y, tz)
+            self._mission_phase = MIS_CLIMB
+            return
+        self._mission_target = (tx, ty, tz)
+        self._mission_phase = MIS_FLY
+
+    def _advance_mission(self, status: VehicleStatus) -> None:
+        """Move through the mission's items as PX4's navigator does (see MIS_* phases)."""
+        if not self.mission:
+            return
+        item = self.mission[self.mission_seq]
+        phase = self._mission_phase
+        now = status.time_s
+        reach = self.params["NAV_ACC_RAD"]
+        if phase == MIS_CLIMB and abs(status.position[2] - self._mission_target[2]) <= reach:
+            if item.command == NAV_TAKEOFF:
+                self._next_mission_item(status)
+            else:  # the climb before a waypoint: now fly to it
+                self._mission_target = (item.north, item.east, self._mission_target[2])
+                self._mission_phase = MIS_FLY
+        elif phase == MIS_FLY and math.dist(status.position, self._mission_target) <= max(reach,
+                                                                                          item.acceptance_radius):
+            if item.command == NAV_LAND:
+                self._mission_phase = MIS_LAND
+            elif item.hold_s > 0:
+                self._mission_item_reached(status)
+                self._mission_phase, self._mission_since = MIS_HOLD, now
+            else:
+                self._next_mission_item(status, reached=True)
+        elif phase == MIS_HOLD and now - self._mission_since >= item.hold_s:
+            self._next_mission_item(status)
+        elif phase == MIS_LAND and status.landed and not self._mission_complete:
+            self._mission_item_reached(status)
+            self._mission_complete = True  # still landing: the thrust winds down and the vehicle disarms
+            self._say(mavlink.MAV_SEVERITY_INFO, "Mission finished, landed")
+
+    def _next_mission_item(self, status: VehicleStatus, reached: bool = False) -> None:
+        item = self.mission[self.mission_seq]
+        if reached or item.command == NAV_TAKEOFF:
+            self._mission_item_reached(status)
+        if self.mission_seq + 1 < len(self.mission):
+            self.mission_seq += 1
+            self._begin_mission_item(status)
+        else:
+            self._mission_phase = MIS_DONE  # PX4 holds at the last item, still in Mission mode
+            self._mission_complete = True
+            self._say(mavlink.MAV_SEVERITY_INFO, "Mission finished, loitering")
