@@ -214,6 +214,11 @@ class VehicleServer:
         self.wall_time_s = time.monotonic() - wall0
         return self.verdict()
 
+    def _before(self, end: float) -> bool:
+        """Whether physics has a step left before ``end``, counted as :meth:`advance` counts them (half a step's
+        slack): an end an ulp past the last step, ``time_s < end`` would wait for a step that never comes."""
+        return self.sim.time_s + 0.5 * self.sim.dt < end
+
     def _step_to(self, target: float) -> None:
         """Physics, commander and truth up to ``target``, streams and events at least every 10 ms of it."""
         sim = self.sim
@@ -226,7 +231,7 @@ class VehicleServer:
         """Held until the companion releases time; then read its API messages, run to the release, answer."""
         hold = self.lockstep = LockstepHold(self)
         log.info("lockstep: held at t=%.3f s until a companion releases time", self.sim.time_s)
-        while not stop.is_set() and self.sim.time_s < end:
+        while not stop.is_set() and self._before(end):
             release = hold.wait(stop)
             if release is None:
                 break
@@ -241,7 +246,7 @@ class VehicleServer:
         wall_ref, sim_ref = wall0, sim.time_s
         batch = max(1, int(0.01 / sim.dt))  # service the sockets at least every 10 ms of simulation
         sockets = [link.sock for link in self.links]
-        while not stop.is_set() and sim.time_s < end:
+        while not stop.is_set() and self._before(end):
             target = min(sim_ref + (time.monotonic() - wall_ref) * speed, end)
             self.advance(target, batch)
             lag = target - sim.time_s

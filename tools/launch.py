@@ -59,6 +59,7 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
 
 
 DEFAULT_ALTITUDE_M = 1.5      # the suite's openings are centred near 1.5 m up; a capture says its own
+LOCKSTEP_HANG_S = 3600.0      # in lockstep, wall seconds after which a flight is taken for hung and stopped
 
 
 def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: int = 0,
@@ -79,7 +80,11 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
     exposure each camera frame reaches the companion; ``rerun``: the companion records the flight in
     ``run_dir/flight.rrd`` (``rerun_connect``: streams it to a running viewer instead); ``link_faults``: relay
     the API link through seeded faults (a seed of None: ``seed``'s), recorded in the verdict's ``link_faults``;
-    ``signing_key``: a PX4 key file both processes sign with (the vehicle then drops unsigned messages)."""
+    ``signing_key``: a PX4 key file both processes sign with (the vehicle then drops unsigned messages).
+    ``timeout_s``: in real time, the wall seconds after which the flight is stopped; in lockstep, the simulated
+    seconds after which the vehicle stops itself, so that the outcome never depends on the machine's load (a
+    wall limit once cut hard-world flights short on a busy machine), and ``LOCKSTEP_HANG_S`` wall seconds bound
+    a hung flight.  Either limit reached is said in the verdict's ``error``."""
     if start is None or yaw_deg is None or altitude is None:
         from scenes.build import resolve_spec
 
@@ -97,7 +102,8 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
     if no_noise:
         vehicle_cmd.append("--no-noise")
     if lockstep:
-        vehicle_cmd.append("--lockstep")
+        vehicle_cmd += ["--lockstep", "--duration", f"{timeout_s:g}"]
+    wall_limit_s = max(timeout_s, LOCKSTEP_HANG_S) if lockstep else timeout_s
     if wind is not None:
         vehicle_cmd.append("--wind=" + ",".join(f"{v:g}" for v in wind))
     companion_cmd = [sys.executable, "-m", "companion", "--connect", f"udpin://127.0.0.1:{api}",
@@ -126,14 +132,16 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
     t0 = time.monotonic()
     companion = _start(companion_cmd, "[companion]", log_sink)
     vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink)
-    interrupted = False
+    interrupted = vehicle_ended = timed_out = False
     try:
         while companion.poll() is None:
             if vehicle.poll() is not None:
+                vehicle_ended = True
                 log.error("the vehicle process exited (code %s) before the mission ended", vehicle.returncode)
                 break
-            if time.monotonic() - t0 > timeout_s:
-                log.error("flight timed out after %.0f s", timeout_s)
+            if time.monotonic() - t0 > wall_limit_s:
+                timed_out = True
+                log.error("flight timed out after %.0f wall seconds", wall_limit_s)
                 break
             time.sleep(0.1)
         if not lockstep:  # (a lockstep companion hands the vehicle its settling second itself)
@@ -188,6 +196,12 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
         verdict["rerun"] = str(run_dir / "flight.rrd")
     if interrupted:
         verdict["error"] = "interrupted (Ctrl-C): both processes were stopped"
+    elif timed_out:
+        verdict["error"] = (f"timed out after {wall_limit_s:.0f} wall seconds: both processes were stopped"
+                            + (" (a lockstep flight this slow is hung)" if lockstep else
+                               "; a longer --timeout, or --lockstep, lets a slow machine finish it"))
+    elif vehicle_ended and lockstep and (vehicle_verdict.get("sim_time_s") or 0.0) >= timeout_s - 0.01:
+        verdict["error"] = f"the flight's {timeout_s:g} simulated seconds (--timeout) ran out before the mission ended"
     elif not vehicle_verdict:
         verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
     (run_dir / "verdict.json").write_text(json.dumps(verdict, indent=2) + "\n")
@@ -242,7 +256,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("-o", "--out", "--run-dir", dest="run_dir", type=Path,
                    help="the flight's run directory: logs, verdict, storyboard (default runs/<time>-<scene>)")
     p.add_argument("--result", type=Path, help="also write the verdict JSON here")
-    p.add_argument("--timeout", type=float, default=300.0, help="wall seconds before giving up (default 300)")
+    p.add_argument("--timeout", type=float, default=300.0,
+                   help="seconds before giving up: wall seconds, or with --lockstep simulated ones (then a hung flight "
+                        f"is stopped after {LOCKSTEP_HANG_S:.0f} wall seconds) (default 300)")
     p.add_argument("--quiet", action="store_true", help="do not stream the two processes' logs")
     p.add_argument("--rerun", action="store_true",
                    help="record the flight for the Rerun viewer in RUN_DIR/flight.rrd (extra: flowgap[viz])")

@@ -43,3 +43,21 @@ def test_ctrl_c_mid_flight_stops_both_processes_and_leaves_a_verdict(tmp_path):
         if sitl.poll() is None:
             sitl.kill()
         pool.release(instance)
+
+
+@pytest.mark.slow
+def test_a_lockstep_flight_is_limited_in_simulated_time_and_says_so(tmp_path):
+    """In lockstep ``--timeout`` counts simulated seconds (a wall limit once cut hard-world flights short on a
+    busy machine, each row then reading "interrupted"): the flight ends where its simulated time runs out,
+    whatever the load, and the verdict says why."""
+    from tools.launch import launch
+
+    pool = InstancePool()
+    instance = pool.acquire()
+    try:
+        verdict = launch("window1_brick", tmp_path / "flight", instance=instance, images=False, log_sink=None,
+                         lockstep=True, timeout_s=3.0, flow="dis:fine")
+    finally:
+        pool.release(instance)
+    assert verdict["success"] is False and verdict["sim_time_s"] == pytest.approx(3.0, abs=0.01)
+    assert verdict["error"] == "the flight's 3 simulated seconds (--timeout) ran out before the mission ended"
