@@ -128,7 +128,7 @@ def next_look_step(view: FrameView, index: int, width: int, height: int, config:
     if sight.offset_m is not None:
         return metric_step(sight.offset_m, sight.clear_radius_m, view.wall_distance, view.area_frac, index + 1, config,
                            normalised_error(used, width, height), sight.clearance_here_m, sight.sightings,
-                           sight.close_sightings)
+                           sight.close_sightings, sight.judged_estimates)
     step = servo_step(used, view.area_frac if used is not None else 0.0, index + 1, width, height, config,
                       view.wall_distance)
     if used is None:     # blind: a new parallax baseline, but no push, nor closer than the hold

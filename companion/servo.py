@@ -65,6 +65,12 @@ class ServoConfig:
     roomy_close_sightings: int = 1  # ... this many of them with the wall within OpeningConfig.decide_within_m
                                     # (measured, hard world seed 60: a place tracked from 2-4 m, last seen 1.85 m
                                     # out, was a blob on the wall; pushed on from 1.2 m, the vehicle hit it)
+    judged_tight: int = 1           # an opening less than roomy_tolerance_m wider than needed (any, in a search
+                                    # look) is pushed only once this many of its size estimates were taken in front
+                                    # of it near the wall (OpeningConfig.judge_offset_m, decide_within_m): from the
+                                    # side a mask took in more than the opening (measured, hard world seeds 74 and 76:
+                                    # openings 0.44 and 0.41 m clear judged 0.54 and 0.61 m from 0.3-0.7 m to their
+                                    # side, pushed at once; the second touched)
     push_sightings: int = 3         # no push on an opening fewer frames than this placed, the tracked one's since
                                     # any switch (measured, hard world seed 69: lost at 1.0 m from the wall, the
                                     # tracker took another opening and pushed on its second sighting, which put
@@ -132,7 +138,7 @@ def servo_step(centroid: tuple[float, float] | None, area_frac: float, step_inde
 def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m: float, area_frac: float,
                 step_index: int, config: ServoConfig = ServoConfig(),
                 error: tuple[float, float] | None = None, clearance_here_m: float | None = None,
-                sightings: int = 0, close_sightings: int = 0) -> ServoStep:
+                sightings: int = 0, close_sightings: int = 0, judged_estimates: int | None = None) -> ServoStep:
     """One step of the metric law, from the body's (right, down) offset to the opening's clear centre in
     metres and the opening's clear radius: remove ``metric_gain`` of the offset (clamped), move forward less
     the further off it is, never closer than ``hold_distance_m`` while the sphere would not clear the edges,
@@ -141,8 +147,10 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
     distance from the heading's axis to the opening's nearest edge seen in this frame, when there is one (an
     elongated opening leaves room along its length), else from the offset and the clear radius.  Not seen in
     this frame, it pushes only with room to spare, on a place ``sightings`` frames placed, ``close_sightings``
-    of them from near the wall; and never on one fewer than ``push_sightings`` frames placed (after a switch,
-    the new one's), where it creeps on as for an unseen place.  ``error``: the image error, for the record."""
+    of them from near the wall; never on one fewer than ``push_sightings`` frames placed (after a switch,
+    the new one's), where it creeps on as for an unseen place; and on one with little room to spare only once
+    ``judged_estimates`` of its size estimates (``judged_tight`` at least) were taken in front of it (None: not
+    counted).  ``error``: the image error, for the record."""
     budget_spent = step_index + 1 >= config.step_budget
     tolerance = alignment_tolerance(clear_radius_m, config)
     fresh = clearance_here_m is not None
@@ -162,7 +170,10 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
     # them close; one that only just fits must have been seen clear in this very frame.
     roomy = (aligned and tolerance >= config.roomy_tolerance_m and sightings >= config.roomy_sightings
              and close_sightings >= config.roomy_close_sightings)
-    placed = sightings >= config.push_sightings
+    # ... and one that only just fits must have been judged from in front of it (judged_tight)
+    judged = (judged_estimates is None or tolerance >= config.roomy_tolerance_m
+              or judged_estimates >= config.judged_tight)
+    placed = sightings >= config.push_sightings and judged
     if not aligned:
         forward = min(forward, max(0.0, distance_m - config.hold_distance_m))
     elif not ((fresh or roomy) and placed) and large:

@@ -177,6 +177,14 @@ def test_the_metric_law_never_pushes_a_sphere_that_would_not_clear():
     # seen from where it is: the clearance flying straight on decides, not the offset to the clear centre
     slot = metric_step((0.3, 0.0), 0.25, 1.2, 0.3, 5, cfg, clearance_here_m=0.25, sightings=3)
     assert slot.aligned and slot.push        # 0.3 m along a long slot, as much room as at its middle
+    # one that only just fits, its size not yet judged from in front of it: no push, and no nearer than a probe
+    # step; with room to spare, the judging is not waited for
+    unjudged = metric_step((0.3, 0.0), 0.25, 1.2, 0.3, 5, cfg, clearance_here_m=0.25, sightings=3, judged_estimates=0)
+    assert unjudged.aligned and not unjudged.push and unjudged.delta_heading[0] == pytest.approx(cfg.probe_step_m)
+    assert metric_step((0.3, 0.0), 0.25, 1.2, 0.3, 5, cfg, clearance_here_m=0.25, sightings=3,
+                       judged_estimates=cfg.judged_tight).push
+    assert metric_step((0.02, 0.0), 0.45, 1.3, 0.05, 5, cfg, clearance_here_m=0.43, sightings=3,
+                       judged_estimates=0).push
     narrow = metric_step((0.0, 0.0), 0.2, 1.2, 0.3, 5, cfg)  # 0.4 m across: no offset is good enough
     assert narrow.tolerance_m < 0 and not narrow.push and narrow.aligned is False
 
