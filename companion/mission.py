@@ -391,10 +391,8 @@ class Mission:
                 raise Refusal(f"no opening placed within {cfg.step_budget} steps: not flying through",
                               openings.world.used, openings.alternative())
             if step.offset_m is not None:    # the metric law pushes only a sphere it has seen clear the edges
-                why = ("" if step.aligned is False else
-                       ", its size not judged from in front of it" if (step.tolerance_m < cfg.roomy_tolerance_m
-                                                                       and sight.judged_estimates < cfg.judged_tight)
-                       else ", not seen clear in the last frame")
+                why = ("" if step.aligned is False else ", its size not judged from in front of it"
+                       if step.judged is False else ", not seen clear in the last frame")
                 raise Refusal(f"could not centre on the opening within {cfg.step_budget} steps (still "
                               f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed{why}): "
                               "not flying through", openings.world.used, openings.alternative())

@@ -88,6 +88,7 @@ class ServoStep:
     offset_m: tuple[float, float] | None = None  # metric (right, down) offset of the target, when measured
     tolerance_m: float | None = None  # how far off the target the sphere still clears the edges (< 0: cannot)
     aligned: bool | None = None  # metric law: the sphere would clear the edges now (None: not measured)
+    judged: bool | None = None   # metric law: its size judged as a push needs (ServoConfig.judged_tight)
 
 
 def metric_offset(error: tuple[float, float], width: int, height: int, focal_px: float,
@@ -186,7 +187,7 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
         dy = config.probe_step_m if step_index % 2 == 0 else -config.probe_step_m
     push = aligned and (fresh or roomy) and placed and (large or budget_spent)
     return ServoStep((forward, dy, dz), error, close, push, (float(offset_m[0]), float(offset_m[1])), tolerance,
-                     aligned)
+                     aligned, judged)
 
 
 def heading_to_ned(delta: tuple[float, float, float], yaw: float) -> tuple[float, float, float]:

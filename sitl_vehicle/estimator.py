@@ -102,10 +102,8 @@ class Estimator:
 
     def propagate(self) -> None:
         """Rotate the attitude estimate by the accumulated delta angle (exact exponential map)."""
+        self.q = self.attitude_now()
         da = self._dangle
-        if da[0] == 0.0 and da[1] == 0.0 and da[2] == 0.0:
-            return
-        self.q = _rotated(self.q, da)
         da[0] = da[1] = da[2] = 0.0
 
     def attitude_now(self) -> tuple[float, float, float, float]:

@@ -59,10 +59,6 @@ log = logging.getLogger(__name__)
 FORCE_ARM_MAGIC = 21196  # PX4: param2 of MAV_CMD_COMPONENT_ARM_DISARM that forces (dis)arming
 
 
-def _finite(values) -> bool:
-    return all(math.isfinite(v) for v in values)
-
-
 class MavlinkVehicleInterface(MissionProtocol):
     """PX4's MAVLink behaviour for one vehicle over any number of links.
 

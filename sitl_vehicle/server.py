@@ -222,7 +222,7 @@ class VehicleServer:
     def _step_to(self, target: float) -> None:
         """Physics, commander and truth up to ``target``, streams and events at least every 10 ms of it."""
         sim = self.sim
-        while sim.time_s + 0.5 * sim.dt < target:
+        while self._before(target):
             self.advance(min(target, sim.time_s + 0.01), 1 << 30)
             self.interface.send_streams(sim.time_s)
             self._announce_events()

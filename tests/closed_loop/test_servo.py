@@ -181,6 +181,7 @@ def test_the_metric_law_never_pushes_a_sphere_that_would_not_clear():
     # step; with room to spare, the judging is not waited for
     unjudged = metric_step((0.3, 0.0), 0.25, 1.2, 0.3, 5, cfg, clearance_here_m=0.25, sightings=3, judged_estimates=0)
     assert unjudged.aligned and not unjudged.push and unjudged.delta_heading[0] == pytest.approx(cfg.probe_step_m)
+    assert unjudged.judged is False and slot.judged is True
     assert metric_step((0.3, 0.0), 0.25, 1.2, 0.3, 5, cfg, clearance_here_m=0.25, sightings=3,
                        judged_estimates=cfg.judged_tight).push
     assert metric_step((0.02, 0.0), 0.45, 1.3, 0.05, 5, cfg, clearance_here_m=0.43, sightings=3,

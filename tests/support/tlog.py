@@ -7,12 +7,12 @@ from pathlib import Path
 from pymavlink import mavutil
 
 
-def tlog_messages(tlog: Path, *types: str) -> list[str]:
-    """Every message of ``tlog`` (or those of ``types``) as the repr of (source system, component, fields), so
-    that NaN fields compare equal; SYSTEM_TIME's Unix time, the one wall-clock field, is left out."""
+def tlog_messages(tlog: Path) -> list[str]:
+    """Every message of ``tlog`` as the repr of (source system, component, fields), so that NaN fields compare
+    equal; SYSTEM_TIME's Unix time, the one wall-clock field, is left out."""
     conn = mavutil.mavlink_connection(str(tlog))
     out = []
-    while (msg := conn.recv_match(type=list(types) or None)) is not None:
+    while (msg := conn.recv_match()) is not None:
         fields = msg.to_dict()
         if msg.get_type() == "SYSTEM_TIME":
             fields.pop("time_unix_usec", None)
