@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 
 from companion.gap import textured_pixels
-from companion.motion import tilted_pixel, translation_in_camera
+from companion.motion import off_heading, tilted_pixel, translation_in_camera
 from companion.opening import OpeningTracker, Sight, candidates_in
 from companion.servo import (
     ServoConfig,
@@ -40,6 +40,20 @@ def along_heading(position, yaw: float) -> float:
 def across_heading(position, yaw: float) -> tuple[float, float]:
     """Coordinates across the initial heading ``yaw``: (right of it, down), metres."""
     return -position[0] * math.sin(yaw) + position[1] * math.cos(yaw), position[2]
+
+
+def along_heading_axis(reading: float | None, turn: float | None, looks_off: float
+                      ) -> tuple[float | None, float | None]:
+    """A frame pair's wall reading and turn, taken along and against the axis of a camera that looks
+    ``looks_off`` (rad, positive: right) off the heading, as they are along and against the heading: the turn
+    less that, and the distance to where the heading's axis meets the wall (the plane's inverse depth there,
+    ``tan(turn) · tan(looks_off)`` of the reading's more, along a ray ``1/cos(looks_off)`` longer).  Without a
+    turn (no plane fitted) the reading is kept as it is."""
+    if turn is None:
+        return reading, None
+    if reading is not None:
+        reading = reading / ((1.0 + math.tan(turn) * math.tan(looks_off)) * math.cos(looks_off))
+    return reading, turn - looks_off
 
 
 @dataclass(frozen=True)
@@ -72,7 +86,10 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
     # Forward flow lives on the first frame's pixels: so do the masks, which are placed and measured from where
     # that frame was taken (measured: scaled from the second frame's distance, every opening came out 10 % small
     # at a 0.18 m step from 1.6 m, and a sideways step misplaced it by the step).
-    candidates = candidates_in(top, K, prev_attitude)
+    # ... and placed as a level camera looking along the heading sees them: the vehicle's yaw wanders off it by
+    # a degree or more while it moves (see companion.motion.level_pixel)
+    looks_off = off_heading(prev_attitude[2], yaw)
+    candidates = candidates_in(top, K, prev_attitude, yaw)
     # The wall is read where the first frame has texture, along the move the autopilot's estimates say (the
     # flow's own focus of expansion is pulled off by the empty space beyond a wall's end: measured, hard world
     # seed 60, readings 5-28 % long there, and a vehicle walked into the wall)
@@ -86,6 +103,7 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
     kept, patches, reading, turn = wall_and_openings(flow, [c.detection.mask for c in candidates], moved, focal,
                                                      openings.config.max_depth_ratio, direction, textured)
     candidates = [candidates[i] for i in kept]
+    reading, turn = along_heading_axis(reading, turn, looks_off)
     found = [c.detection for c in candidates]
     here, place = along_heading(position, yaw), across_heading(position, yaw)   # place: (right, down) now
     across = place[0]
@@ -101,7 +119,7 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
     # the wall 1.09 m ahead", or stalled 2.5 m out, their openings scaled by that wrong distance to half their
     # size).
     wall_distance, ahead = wall.view(here, across)
-    axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), K, prev_attitude[0], prev_attitude[1])
+    axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), K, prev_attitude[0], prev_attitude[1], looks_off)
     # the wall straight ahead of where the first frame (whose pixels the masks live in) was taken
     seen_from, seen_place = along_heading(prev_position, yaw), across_heading(prev_position, yaw)
     seen_distance = (wall_distance + (here - seen_from) + (seen_place[0] - across) * wall_slope(wall_yaw)

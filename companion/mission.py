@@ -25,7 +25,7 @@ from companion.camera import CameraError, FrameSource
 from companion.flow.colour import flow_to_colour
 from companion.link.base import AutopilotLink, LinkError, LinkLost
 from companion.look import across_heading, along_heading, next_look_step, see_frame
-from companion.motion import tilted_pixel
+from companion.motion import off_heading, tilted_pixel
 from companion.opening import OpeningConfig, OpeningTracker
 from companion.perception import perceive
 from companion.runlog import RunLog
@@ -112,6 +112,7 @@ class MissionResult:
     wall_distance_m: float | None = None
     far_distance_m: float | None = None
     push_length_m: float | None = None
+    heading_rad: float | None = None    # the heading flown along (NED yaw): the yaw at the offboard start
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -166,7 +167,7 @@ class Mission:
                                self.config.takeoff_timeout_s, "takeoff altitude")
             self._enter(State.OFFBOARD)
             start = self.link.telemetry.position
-            self.yaw = self.link.telemetry.attitude_euler[2]
+            self.yaw = self.result.heading_rad = self.link.telemetry.attitude_euler[2]
             self.link.start_offboard(start, self.yaw)
             self._recorded_setpoint(start)
             self._enter(State.SERVO)
@@ -352,7 +353,8 @@ class Mission:
             self.runlog.save_images(n, rgb=frame.rgb, flow_bgr=flow_bgr, mask=detection.mask)
             state = ("push" if next_step.push else "aligned" if next_step.aligned else
                      "close" if next_step.close else "servo") + (f"; {sight.note}" if sight.note else "")
-            shown = None if used is None else tilted_pixel(used, self.camera.K, prev_attitude[0], prev_attitude[1])
+            shown = None if used is None else tilted_pixel(used, self.camera.K, prev_attitude[0], prev_attitude[1],
+                                                             off_heading(prev_attitude[2], self.yaw))
             row = StoryRow(n, frame.rgb, flow_bgr[:, :, ::-1], detection.mask, detection.centroid, shown,
                            step_text(n, next_step.error, next_step.delta_heading, wall_distance, state))
             self.storyboard.add(row)

@@ -96,13 +96,16 @@ class Sight:
     refusal: str | None = None      # why the vehicle will not fly through (then it must not)
 
 
-def candidates_in(detection, K: np.ndarray, attitude) -> list[Candidate]:
-    """The openings of one detection (all its candidates), each with its clear centre as a level camera would
-    see it, given the (roll, pitch, yaw) ``attitude`` at the frame."""
-    from companion.motion import level_pixel
+def candidates_in(detection, K: np.ndarray, attitude, heading: float | None = None) -> list[Candidate]:
+    """The openings of one detection (all its candidates), each with its clear centre as a level camera looking
+    along ``heading`` would see it, given the (roll, pitch, yaw) ``attitude`` at the frame (None: along the
+    camera's own yaw, for the image phase of a replay)."""
+    from companion.motion import level_pixel, off_heading
 
+    yaw = 0.0 if heading is None else off_heading(attitude[2], heading)
     found = [d for d in (detection.candidates or (detection,)) if d.found]
-    return [Candidate(d, level_pixel(d.clear_centre or d.centroid, K, attitude[0], attitude[1])) for d in found]
+    return [Candidate(d, level_pixel(d.clear_centre or d.centroid, K, attitude[0], attitude[1], yaw))
+            for d in found]
 
 
 def median_place(places: list[Point]) -> Point:

@@ -89,7 +89,7 @@ def score_pair(cloud, spec, camera, first: dict, second: dict, backend, configs:
     import cv2
 
     from companion.gap import CameraMotion, clear_circle, detect_gap_parallax
-    from companion.motion import derotate, tilted_pixel
+    from companion.motion import derotate, off_heading, tilted_pixel
     from companion.opening import edge_distance_px
     from scenes import Pose, render_splats
     from tools.eval_masks import gt_mask
@@ -108,7 +108,9 @@ def score_pair(cloud, spec, camera, first: dict, second: dict, backend, configs:
     n_labels, labels = cv2.connectedComponents(truth.astype(np.uint8))
     focal = float(camera.K[0, 0])
     w, h = camera.width, camera.height
-    axis = tilted_pixel(((w - 1) / 2, (h - 1) / 2), camera.K, first["attitude_est"][0], first["attitude_est"][1])
+    looks_off = off_heading(first["attitude_est"][2], math.radians(spec.start_yaw_deg))   # the heading flown
+    axis = tilted_pixel(((w - 1) / 2, (h - 1) / 2), camera.K, first["attitude_est"][0], first["attitude_est"][1],
+                        looks_off)
     shift = focal / forward
     ahead = (axis[0] + (p1[1] - p0[1]) * shift, axis[1] + (p1[2] - p0[2]) * shift)
     motion = (p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2])

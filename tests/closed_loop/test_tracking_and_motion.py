@@ -139,6 +139,47 @@ def test_rolled_right_the_level_horizon_rises_on_the_right():
         assert level_pixel(tilted_pixel(pixel, KM, 0.2, -0.15), KM, 0.2, -0.15) == pytest.approx(pixel, abs=1e-9)
 
 
+@pytest.mark.parametrize("off_deg", [2.0, -4.5])
+def test_a_camera_yawed_off_the_heading_sees_its_axis_aside_by_f_tan_yaw(off_deg):
+    from companion.motion import level_pixel, tilted_pixel
+
+    t = math.radians(off_deg)
+    # yawed right by t: the camera's axis points t right of the heading, which the heading's camera sees
+    # f·tan t to the right; the heading's axis appears f·tan t to the left to the yawed camera
+    assert level_pixel((CX, CY), KM, 0.0, 0.0, t) == pytest.approx((CX + KF * math.tan(t), CY), abs=1e-9)
+    assert tilted_pixel((CX, CY), KM, 0.0, 0.0, t) == pytest.approx((CX - KF * math.tan(t), CY), abs=1e-9)
+    for pixel in [(40.0, 30.0), (250.0, 200.0)]:
+        assert level_pixel(tilted_pixel(pixel, KM, 0.1, -0.05, t), KM, 0.1, -0.05, t) == pytest.approx(pixel,
+                                                                                                         abs=1e-9)
+
+
+@pytest.mark.parametrize("yaw, heading, expected", [
+    (0.3, 0.1, 0.2), (-0.1, 0.1, -0.2), (math.pi - 0.05, -math.pi + 0.05, -0.1), (-math.pi + 0.05, math.pi - 0.05, 0.1),
+])
+def test_off_heading_is_the_yaw_less_the_heading_wrapped(yaw, heading, expected):
+    from companion.motion import off_heading
+
+    assert off_heading(yaw, heading) == pytest.approx(expected, abs=1e-12)
+
+
+def test_openings_are_placed_as_seen_along_the_heading_whatever_the_cameras_yaw():
+    from types import SimpleNamespace
+
+    from companion.opening import candidates_in
+
+    t = math.radians(3.0)
+    seen = SimpleNamespace(found=True, candidates=None, clear_centre=(CX, CY), centroid=(CX, CY))
+    heading = 1.2
+    # the vehicle yawed 3° right of its heading sees an opening straight ahead of its camera: that opening is
+    # f·tan 3° right of the heading's axis; looking along the heading, it is where the camera sees it
+    (yawed,) = candidates_in(seen, KM, (0.0, 0.0, heading + t), heading)
+    assert yawed.target_px == pytest.approx((CX + KF * math.tan(t), CY), abs=1e-9)
+    (along,) = candidates_in(seen, KM, (0.0, 0.0, heading), heading)
+    assert along.target_px == pytest.approx((CX, CY), abs=1e-9)
+    # without a heading (a replay's image phase): placed along the camera's own yaw, as before
+    assert candidates_in(seen, KM, (0.0, 0.0, heading + t))[0].target_px == pytest.approx((CX, CY), abs=1e-9)
+
+
 def test_a_ray_behind_the_other_camera_keeps_the_pixel():
     from companion.motion import level_pixel, tilted_pixel
 

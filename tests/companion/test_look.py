@@ -89,3 +89,28 @@ def test_a_frame_pair_of_a_forward_step_reads_the_wall_and_places_the_opening():
     # clear centre came out 2-3 px left of the polygon's, 0.03 m at 1.4 m)
     assert view.sight.offset_m == pytest.approx((0.475, 0.0), abs=0.04)
     assert view.detection is view.sight.detection and view.area_frac == pytest.approx(truth.mean(), rel=0.15)
+
+
+@pytest.mark.parametrize("turn_deg, off_deg", [(0.0, 3.0), (15.0, 4.5), (-18.0, -2.0), (12.0, -3.5)])
+def test_a_yawed_cameras_wall_reading_is_taken_to_the_heading(turn_deg, off_deg):
+    """A wall 1.3 m ahead on the heading's axis, turned by θ against the heading, read by a camera yawed δ off
+    it: the plane is read along and against the camera's axis, and taken to the heading's it is the wall's."""
+    from companion.look import along_heading_axis
+    from companion.servo import wall_from_flow
+    from tests.companion.synthetic import FOCAL_320x240 as f
+
+    distance, theta, delta, step = 1.3, math.radians(turn_deg), math.radians(off_deg), 0.08
+    xn = (np.mgrid[0:H, 0:W][1].astype(np.float64) - (W - 1) / 2) / f
+    # camera point (x right, z forward) at heading-frame forward z·cos δ − x·sin δ, right z·sin δ + x·cos δ; on
+    # the wall forward = distance + right·tan θ, so along the ray x = xn·z:
+    inverse_depth = ((math.cos(delta) - math.sin(delta) * math.tan(theta))
+                     - xn * (math.sin(delta) + math.cos(delta) * math.tan(theta))) / distance
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
+    rho = inverse_depth * step                                             # a step along the camera's axis
+    flow = np.stack([(xs - (W - 1) / 2) * rho, (ys - (H - 1) / 2) * rho], -1).astype(np.float32)
+    reading, turn = wall_from_flow(flow, None, step, f)
+    assert turn == pytest.approx(theta + delta, abs=0.01)                  # against the camera's axis
+    assert along_heading_axis(reading, turn, delta) == pytest.approx((distance, theta), abs=2e-3)
+    assert along_heading_axis(reading, turn, 0.0) == (reading, turn)
+    assert along_heading_axis(reading, None, delta) == (reading, None)     # no plane: kept as read
+    assert along_heading_axis(None, turn, delta) == (None, pytest.approx(theta, abs=0.01))

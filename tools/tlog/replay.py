@@ -63,6 +63,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     spec, cloud = load_scene(summary["scene"])
     camera = PinholeCamera()
     openings = OpeningTracker()   # the image phase of the mission's tracking: its centroid_used
+    heading = summary.get("heading_rad")   # absent from runs before 2026-12-05: placed along the camera's yaw
     if recording is not None:
         recording.scene(spec, cloud)
         recording.camera(camera.K, camera.width, camera.height)
@@ -79,8 +80,9 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
         moved = math.dist(before, now) if before is not None and now is not None else None
         p = perceive(prev, rgb, frames[step - 1]["attitude_est"], frames[step]["attitude_est"], camera.K,
                      backend, detect, baseline_m=moved, min_baseline_m=MissionConfig().min_baseline_m)
-        used = openings.observe(candidates_in(p.detection, camera.K, frames[step]["attitude_est"]), (0.0, 0.0),
-                                None, float(camera.K[0, 0]), camera.width, camera.height).target_px
+        seen = candidates_in(p.detection, camera.K, frames[step]["attitude_est"], heading)
+        used = openings.observe(seen, (0.0, 0.0), None, float(camera.K[0, 0]), camera.width,
+                                camera.height).target_px
         flown = decisions.get(step, {}).get("centroid_used")
         if used is None or flown is None:
             distance = None if used is None and flown is None else math.inf
