@@ -45,7 +45,8 @@ class WallTrack:
 
     def add(self, here: float, across: float, measured: float | None, rough: float | None,
             turn: float | None) -> float | None:
-        """One frame pair's readings, taken at ``here`` (forward coordinate) and ``across`` (right): the wall's
+        """One frame pair's readings, taken from ``here`` (forward coordinate) of the wall at ``across`` (right;
+        straight ahead of the pair's first frame, see :func:`companion.look.see_frame`): the wall's
         distance with a gap in view, the rough one read without a gap (None: the distance reading, if any, is the
         rough one too), and the wall's turn (each None when not read).  Returns the distance reading kept (None
         when out of range)."""

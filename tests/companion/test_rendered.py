@@ -134,10 +134,10 @@ def test_variational_refinement_sharpens_a_coarse_flow_towards_the_truth(rendere
     assert refined is not coarse and np.isfinite(refined).all()
 
 
-def _placed(cloud, camera, heading: float, off: float) -> tuple:
-    """(wall distance, wall turn, offset right) of window1_brick's opening after five pairs stepping 0.08 m on
-    and 0.12 m across (1.9-1.5 m from the wall, 0.04-0.16 m right of the opening's centre), flown along
-    ``heading`` (0: the suite faces north) by a vehicle whose yaw is ``off`` that heading."""
+def _flown(cloud, camera, heading: float, off: float, places: list) -> object:
+    """The last :func:`companion.look.see_frame` view of window1_brick from frame pairs taken at ``places``
+    (north, east, down; each pair from one to the next) along ``heading`` (0: the suite faces north) by a vehicle
+    whose yaw is ``off`` that heading."""
     import math
 
     from companion.gap import get_detector
@@ -151,12 +151,18 @@ def _placed(cloud, camera, heading: float, off: float) -> tuple:
     flow, detect = make_flow_backend("dis", preset="fine"), get_detector("parallax")
     openings, wall = OpeningTracker(), WallTrack()
     attitude = (0.0, 0.0, heading + off)
-    for k in range(5):
-        a = (1.1 + 0.08 * k, 0.1 + (0.06 if k % 2 else -0.06), -1.5)
-        b = (1.1 + 0.08 * (k + 1), 0.1 - (0.06 if k % 2 else -0.06), -1.5)
+    for a, b in zip(places[:-1], places[1:], strict=True):
         first, second = (render_splats(cloud, camera, Pose(p, euler_to_quat(*attitude))).rgb for p in (a, b))
         seen = perceive(first, second, attitude, attitude, camera.K, flow, detect, True, math.dist(a, b), 0.02)
         view = see_frame(seen, first, a, b, attitude, math.dist(a, b), False, camera.K, heading, openings, wall)
+    return view
+
+
+def _placed(cloud, camera, heading: float, off: float) -> tuple:
+    """(wall distance, wall turn, offset right) of window1_brick's opening after five pairs stepping 0.08 m on
+    and 0.12 m across (1.9-1.5 m from the wall, 0.04-0.16 m right of the opening's centre)."""
+    places = [(1.1 + 0.08 * k, 0.1 + (0.06 if k % 2 else -0.06), -1.5) for k in range(6)]
+    view = _flown(cloud, camera, heading, off, places)
     return view.wall_distance, view.wall_yaw, view.sight.offset_m[0]
 
 
@@ -172,3 +178,18 @@ def test_an_opening_is_placed_where_it_is_whatever_the_vehicles_yaw_off_its_head
         distance, turn, offset = _placed(rendered["cloud"], rendered["camera"], 0.0, math.radians(off_deg))
         assert offset == pytest.approx(along[2], abs=0.02), off_deg
         assert distance == pytest.approx(along[0], rel=0.02) and turn == pytest.approx(along[1], abs=0.01)
+
+
+def test_a_turned_walls_distance_is_read_where_the_first_frame_looked(rendered):
+    """Flown along a heading 15° off the wall's normal, stepping 0.3 m across and 0.05 m on per pair: forward flow
+    gives the wall's depth from the second frame where the first frame looked, and put ahead of the second frame
+    it was 0.3·tan 15° = 0.08 m off (measured here: 0.066 m short, and 0.005 m long read where it was)."""
+    import math
+
+    heading = math.radians(15.0)
+    places = [(1.4 + 0.05 * k, -0.75 + 0.3 * k, -1.5) for k in range(6)]   # across the wall, left to right
+    view = _flown(rendered["cloud"], rendered["camera"], heading, 0.0, places)
+    north = places[-1][0]
+    truth = (rendered["spec"].wall.distance - north) / math.cos(heading)   # along the heading to the wall
+    assert view.wall_yaw == pytest.approx(heading, abs=0.03)
+    assert view.wall_distance == pytest.approx(truth, abs=0.025)
