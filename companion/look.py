@@ -113,9 +113,9 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
     # logs of hard world seeds 76 and 77 read again, carried along by the true turn: within 1.6 m of the wall the
     # track's distance came out 0.029 m long or more at one step in ten, 0.012 m read ahead of the first frame;
     # 0.034 and 0.014 m on walls turned over 10°)
-    seen_across = across_heading(prev_position, yaw)[0]
+    seen_from, seen_place = along_heading(prev_position, yaw), across_heading(prev_position, yaw)
     measured = wall.add(
-        here, seen_across, reading,
+        here, seen_place[0], reading,
         # without a gap the wall is still measured, for one purpose only: not to walk into it blind
         None if found or still else wall_distance_from_flow(flow, None, moved, direction, focal, textured),
         turn if moved >= 0.08 else None)
@@ -128,7 +128,6 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
     wall_distance, ahead = wall.view(here, across)
     axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), K, prev_attitude[0], prev_attitude[1], looks_off)
     # the wall straight ahead of where the first frame (whose pixels the masks live in) was taken
-    seen_from, seen_place = along_heading(prev_position, yaw), (seen_across, across_heading(prev_position, yaw)[1])
     seen_distance = (wall_distance + (here - seen_from) + (seen_place[0] - across) * wall_slope(wall_yaw)
                      if wall_distance is not None else None)
     sight = openings.observe(candidates, seen_place, seen_distance, focal, width, height, axis, moved, wall_yaw,
