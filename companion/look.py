@@ -143,16 +143,17 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
 
 
 def next_look_step(view: FrameView, index: int, width: int, height: int, config: ServoConfig,
-                   wall_prior: float | None, accepted: bool) -> ServoStep:
+                   wall_prior: float | None, accepted: bool, lag_m: tuple[float, float] = (0.0, 0.0)) -> ServoStep:
     """The step after frame pair ``index`` (0-based) of a look: the metric law once the tracked opening is
     placed; before, the paper's image law, never nearer the wall than the hold distance while it sees nothing,
     or (a look of the search, ``wall_prior`` given) while its own wall is not measured yet; ``accepted``: whether
-    the tracker took this frame's sighting."""
+    the tracker took this frame's sighting; ``lag_m``: the waypoint's place (right, down) less the frame's
+    (see :func:`companion.servo.metric_step`)."""
     sight, used = view.sight, view.sight.target_px
     if sight.offset_m is not None:
         return metric_step(sight.offset_m, sight.clear_radius_m, view.wall_distance, view.area_frac, index + 1, config,
                            normalised_error(used, width, height), sight.clearance_here_m, sight.sightings,
-                           sight.close_sightings, sight.judged_estimates)
+                           sight.close_sightings, sight.judged_estimates, lag_m)
     step = servo_step(used, view.area_frac if used is not None else 0.0, index + 1, width, height, config,
                       view.wall_distance)
     if used is None:     # blind: a new parallax baseline, but no push, nor closer than the hold

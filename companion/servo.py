@@ -139,7 +139,8 @@ def servo_step(centroid: tuple[float, float] | None, area_frac: float, step_inde
 def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m: float, area_frac: float,
                 step_index: int, config: ServoConfig = ServoConfig(),
                 error: tuple[float, float] | None = None, clearance_here_m: float | None = None,
-                sightings: int = 0, close_sightings: int = 0, judged_estimates: int | None = None) -> ServoStep:
+                sightings: int = 0, close_sightings: int = 0, judged_estimates: int | None = None,
+                lag_m: tuple[float, float] = (0.0, 0.0)) -> ServoStep:
     """One step of the metric law, from the body's (right, down) offset to the opening's clear centre in
     metres and the opening's clear radius: remove ``metric_gain`` of the offset (clamped), move forward less
     the further off it is, never closer than ``hold_distance_m`` while the sphere would not clear the edges,
@@ -151,13 +152,25 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
     of them from near the wall; never on one fewer than ``push_sightings`` frames placed (after a switch,
     the new one's), where it creeps on as for an unseen place; and on one with little room to spare only once
     ``judged_estimates`` of its size estimates (``judged_tight`` at least) were taken in front of it (None: not
-    counted).  ``error``: the image error, for the record."""
+    counted).  ``error``: the image error, for the record.  ``lag_m``: how far (right, down) the waypoint the
+    vehicle is on its way to lies from where the frame was taken; a centring step goes from the waypoint, the
+    push from where the vehicle is."""
     budget_spent = step_index + 1 >= config.step_budget
     tolerance = alignment_tolerance(clear_radius_m, config)
     fresh = clearance_here_m is not None
     limit = config.metric_max_step_m
-    dy = float(np.clip(config.metric_gain * offset_m[0], -limit, limit))
-    dz = float(np.clip(config.metric_gain * offset_m[1], -limit, limit))
+
+    def correction(offset: tuple[float, float]) -> tuple[float, float]:
+        return (float(np.clip(config.metric_gain * offset[0], -limit, limit)),
+                float(np.clip(config.metric_gain * offset[1], -limit, limit)))
+
+    # The waypoint is the last one plus the step.  Taken from the frame's place, the step counted the part of the
+    # last one the vehicle had yet to fly (or had overshot) twice: the frame is taken within the arrival tolerance
+    # (0.06 m; a step shorter than that "arrives" at once), and the next waypoint went that far past the opening's
+    # centre (measured, hard world seed 77, hard_0602231812: 1.0 m from the wall, 0.10-0.16 m swings across a
+    # 0.05 m wide centre for 17 steps, then "could not centre"; in seeds 76 and 77, the frame's place across was
+    # 0.024 m from the waypoint at the median of 3,161 metric steps, over 0.03 m in 42 % of them).
+    dy, dz = correction((offset_m[0] - lag_m[0], offset_m[1] - lag_m[1]))
     off = math.hypot(*offset_m)
     if fresh:
         aligned = 0.0 <= tolerance and alignment_tolerance(clearance_here_m, config) >= 0.0
@@ -186,6 +199,8 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
         # from a turned wall, a vehicle centred on an opening never saw it clear again)
         dy = config.probe_step_m if step_index % 2 == 0 else -config.probe_step_m
     push = aligned and (fresh or roomy) and placed and (large or budget_spent)
+    if push:        # the push starts from where the frame was taken (companion.mission), its bias from there
+        dy, dz = correction(offset_m)
     return ServoStep((forward, dy, dz), error, close, push, (float(offset_m[0]), float(offset_m[1])), tolerance,
                      aligned, judged)
 

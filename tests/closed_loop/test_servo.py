@@ -711,3 +711,46 @@ def test_wall_yaw_fits_the_wall_plane_only():
     mask = np.ones((h, w), bool)
     mask[100:124, 80:160] = False
     assert wall_yaw_from_flow(_flow_of(plane), mask, F) is None
+
+
+def _centre_on(gap_right: float, lag_known: bool, overshoot: float = 0.6, arrival_m: float = 0.06):
+    """Centring at the hold distance on a 0.54 m wide opening ``gap_right`` m across, the waypoint the last one
+    plus each step, and the vehicle as the mission sees it: a waypoint within ``arrival_m`` of it is reached at
+    once (the frame is taken before it moves), a farther one passed by ``overshoot`` of the step (within the
+    arrival tolerance).  Returns the step it pushes at (None: not in 30) and the vehicle's place less the
+    opening's at each frame after the first."""
+    from companion.servo import metric_step
+
+    cfg = ServoConfig()
+    waypoint = vehicle = 0.0
+    seen = []
+    for k in range(30):
+        off = (gap_right - vehicle, 0.0)
+        step = metric_step(off, 0.27, 1.0, 0.3, 5 + k, cfg, clearance_here_m=max(0.0, 0.27 - abs(off[0])),
+                           sightings=10, close_sightings=10, judged_estimates=3,
+                           lag_m=(waypoint - vehicle, 0.0) if lag_known else (0.0, 0.0))
+        if step.push:
+            return k, seen
+        target = waypoint + step.delta_heading[1]
+        if abs(target - vehicle) >= arrival_m:
+            vehicle = target + float(np.clip(overshoot * (target - waypoint), -arrival_m, arrival_m))
+        waypoint = target
+        seen.append(vehicle - gap_right)
+    return None, seen
+
+
+def test_a_centring_step_goes_from_the_waypoint_not_from_where_the_frame_was_taken():
+    """The failure it fixes (hard world seed 77, hard_0602231812): each frame taken short of or past the
+    waypoint, within the arrival tolerance, and the step taken from the frame's place but added to the waypoint,
+    the vehicle swung 0.10-0.16 m across a centre 0.05 m wide for 17 steps and never pushed."""
+    pushed, seen = _centre_on(-0.08, lag_known=True)
+    assert pushed is not None and pushed <= 6
+    assert min(seen) >= -0.02 and abs(seen[-1]) <= 0.01      # from 0.08 m right of it, never swung past it
+    # the step from the frame's place (no lag given) swings across it, as flown
+    _, swung = _centre_on(-0.08, lag_known=False)
+    assert min(swung) < -0.05 and max(swung[1:]) > 0.03
+    # the push's bias still goes from the frame's place: the push starts there (companion.mission)
+    from companion.servo import metric_step
+    push = metric_step((0.02, 0.0), 0.45, 1.0, 0.3, 5, ServoConfig(), clearance_here_m=0.43, sightings=3,
+                       lag_m=(0.05, 0.0))
+    assert push.push and push.delta_heading[1] == pytest.approx(ServoConfig().metric_gain * 0.02)
