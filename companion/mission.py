@@ -346,7 +346,7 @@ class Mission:
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
                 raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on", None,
                               openings.alternative())
-            lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position)))
+            lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))
             next_step = next_look_step(view, k, width, height, cfg, wall_prior, openings.last_accepted, lag)
             self.clock.sleep_until(t_frame + self.config.perception_latency_s)
             self.result.servo_steps = self._steps_before + k + 1

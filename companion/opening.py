@@ -42,6 +42,7 @@ from companion.servo import (
     alignment_tolerance,
     metric_offset,
     normalised_error,
+    wall_slope,
 )
 from companion.tracking import ConfirmingCentroidFilter, TrackingConfig
 
@@ -204,8 +205,20 @@ class OpeningTracker:
         def radius_px(det) -> float:
             return wall_view(det)[1]
 
+        slope = wall_slope(wall_yaw_rad)
+
+        def depth(target_px: Point) -> float:
+            """The wall's depth along the heading at a level pixel: a turned wall is nearer on one side.  Scaled
+            by the depth on the axis, an opening 0.5 m aside of it at 1.5 m from a wall turned 15° came out
+            0.06 m further aside than it is and 9 % larger seen from its near side (window1_brick, DIS fine)."""
+            lateral = (target_px[0] - width / 2) / focal_px
+            return wall_distance_m / max(1.0 - lateral * slope, 0.5)
+
+        def radius_m(c: Candidate) -> float:
+            return self.clear_radius_m(radius_px(c.detection), depth(c.target_px), focal_px)
+
         def place(target_px: Point) -> Point:
-            off = metric_offset(normalised_error(target_px, width, height), width, height, focal_px, wall_distance_m)
+            off = metric_offset(normalised_error(target_px, width, height), width, height, focal_px, depth(target_px))
             return across_m[0] + off[0], across_m[1] + off[1]
         if wall_distance_m is not None:
             if self.avoid:
@@ -270,11 +283,10 @@ class OpeningTracker:
         # that one's place, rejects a place that jumps and takes it after two that agree
         chosen = next((cp for cp in placed if cp[0] is pick), None) if self.pixels.last_accepted else None
         self.world.update(chosen[1] if chosen is not None else None)
-        self._remember([cp for cp in placed if chosen is None or cp[0] is not chosen[0]], wall_distance_m, focal_px,
-                       radius_px)
+        self._remember([cp for cp in placed if chosen is None or cp[0] is not chosen[0]], radius_m)
         estimated = chosen is not None and self.world.last_accepted
         if estimated:
-            estimate = self.clear_radius_m(radius_px(chosen[0].detection), wall_distance_m, focal_px)
+            estimate = radius_m(chosen[0])
             self.radii.append(estimate)
             if (math.dist(chosen[1], across_m) <= self.config.judge_offset_m
                     and wall_distance_m <= self.config.decide_within_m and moved_m >= self.config.judge_step_m):
@@ -291,11 +303,11 @@ class OpeningTracker:
         refusal = None
         judged = len(self.close_radii) >= self.config.min_estimates
         if judged and alignment_tolerance(radius, self.servo) < 0:
-            fits = [(c, p, self.clear_radius_m(radius_px(c.detection), wall_distance_m, focal_px))
-                    for c, p in placed if chosen is None or c is not chosen[0]]
+            fits = [(c, p, radius_m(c)) for c, p in placed if chosen is None or c is not chosen[0]]
             fits = [f for f in fits if alignment_tolerance(f[2], self.servo) >= 0]
             too_small = self.describe_too_small(chosen[0].detection if chosen is not None else None, radius,
-                                                wall_distance_m, focal_px)
+                                                depth(chosen[0].target_px) if chosen is not None else wall_distance_m,
+                                                focal_px)
             if fits and not self.switched:
                 c, p, r = max(fits, key=lambda f: f[2])
                 self.pixels.seed(c.target_px)
@@ -319,22 +331,21 @@ class OpeningTracker:
             shift = focal_px / wall_distance_m
             axis = (axis_px[0] + (viewer[0] - across_m[0]) * shift, axis_px[1] + (viewer[1] - across_m[1]) * shift)
             mask = wall_view(chosen[0].detection)[0]
-            here = self.clear_radius_m(edge_distance_px(mask, (axis[0] * stretch, axis[1])), wall_distance_m,
+            here = self.clear_radius_m(edge_distance_px(mask, (axis[0] * stretch, axis[1])), depth(axis),
                                        focal_px) if chosen[0].detection.mask.any() else 0.0
         return Sight(chosen[0].detection if chosen is not None else None, used, offset, steady, here,
                      len(self.places), self.close_places, len(self.close_radii), note, refusal)
 
-    def _remember(self, placed: list[tuple[Candidate, Point]], wall_distance_m: float, focal_px: float,
-                  radius_px) -> None:
-        """Keep the places and clear radii of openings other than the tracked one (each sighting joins the
-        remembered opening whose place is within the world gate of it, or starts one)."""
+    def _remember(self, placed: list[tuple[Candidate, Point]], radius_m) -> None:
+        """Keep the places and clear radii (``radius_m`` of a candidate) of openings other than the tracked one (each
+        sighting joins the remembered opening whose place is within the world gate of it, or starts one)."""
         gate, window = self.config.world_gate_m, self.config.radius_window
         for c, p in placed:
             if c.detection.clear_radius_px < self.config.min_opening_px:
                 continue
             if self.world.used is not None and math.dist(p, self.world.used) <= gate:
                 continue                       # the tracked one, seen but not matched in the image
-            radius = self.clear_radius_m(radius_px(c.detection), wall_distance_m, focal_px)
+            radius = radius_m(c)
             near = _nearest(self.elsewhere, p, gate, lambda e: e.place(window))
             if near is None:
                 self.elsewhere.append(SeenElsewhere([p], [radius]))
