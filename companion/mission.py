@@ -392,7 +392,7 @@ class Mission:
             if next_step.push:
                 break
         else:
-            if step.offset_m is None and wall_prior is not None:   # a look pushes only what it has placed
+            if step.offset_m is None:   # a look pushes only what it has placed (companion.look.next_look_step)
                 raise Refusal(f"no opening placed within {cfg.step_budget} steps: not flying through",
                               openings.world.used, openings.alternative())
             if step.offset_m is not None:    # the metric law pushes only a sphere it has seen clear the edges

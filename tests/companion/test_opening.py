@@ -395,5 +395,5 @@ def test_an_opening_aside_in_a_turned_wall_is_placed_and_sized_at_its_own_depth(
     assert left.offset_m[0] == pytest.approx(-a * depth_left, abs=1e-3)
     assert abs(right.offset_m[0] - a * 1.5) > 0.02                     # not where the axis's depth puts it
     thickness = right_tracker.servo.wall_thickness_m
-    assert right_tracker.radii[-1] / left_tracker.radii[-1] == pytest.approx((depth_right + thickness) / (depth_left + thickness),
-                                                            rel=0.02)
+    scale = (depth_right + thickness) / (depth_left + thickness)
+    assert right_tracker.radii[-1] / left_tracker.radii[-1] == pytest.approx(scale, rel=0.02)
