@@ -145,10 +145,10 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
 def next_look_step(view: FrameView, index: int, width: int, height: int, config: ServoConfig,
                    wall_prior: float | None, accepted: bool, lag_m: tuple[float, float] = (0.0, 0.0)) -> ServoStep:
     """The step after frame pair ``index`` (0-based) of a look: the metric law once the tracked opening is
-    placed; before, the paper's image law, never nearer the wall than the hold distance while it sees nothing,
-    or (a look of the search, ``wall_prior`` given) while its own wall is not measured yet; ``accepted``: whether
-    the tracker took this frame's sighting; ``lag_m``: the waypoint's place (right, down) less the frame's
-    (see :func:`companion.servo.metric_step`)."""
+    placed; before, the paper's image law without its push, never nearer the wall than the hold distance while it
+    sees nothing, or (a look of the search, ``wall_prior`` given) while its own wall is not measured yet;
+    ``accepted``: whether the tracker took this frame's sighting; ``lag_m``: the waypoint's place (right, down)
+    less the frame's (see :func:`companion.servo.metric_step`)."""
     sight, used = view.sight, view.sight.target_px
     if sight.offset_m is not None:
         return metric_step(sight.offset_m, sight.clear_radius_m, view.wall_distance, view.area_frac, index + 1, config,

@@ -395,12 +395,12 @@ class Mission:
             if step.offset_m is None:   # a look pushes only what it has placed (companion.look.next_look_step)
                 raise Refusal(f"no opening placed within {cfg.step_budget} steps: not flying through",
                               openings.world.used, openings.alternative())
-            if step.offset_m is not None:    # the metric law pushes only a sphere it has seen clear the edges
-                why = ("" if step.aligned is False else ", its size not judged from in front of it"
-                       if step.judged is False else ", not seen clear in the last frame")
-                raise Refusal(f"could not centre on the opening within {cfg.step_budget} steps (still "
-                              f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed{why}): "
-                              "not flying through", openings.world.used, openings.alternative())
+            # the metric law pushes only a sphere it has seen clear the edges
+            why = ("" if step.aligned is False else ", its size not judged from in front of it"
+                   if step.judged is False else ", not seen clear in the last frame")
+            raise Refusal(f"could not centre on the opening within {cfg.step_budget} steps (still "
+                          f"{math.hypot(*step.offset_m):.2f} m off, {step.tolerance_m:.2f} m allowed{why}): "
+                          "not flying through", openings.world.used, openings.alternative())
         self.result.wall_distance_m = wall_distance
         here = self._forward(prev_position)
         if wall_distance is None:  # fewer readings than the minimum: still better than nothing

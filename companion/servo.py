@@ -166,7 +166,7 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
 
     # The waypoint is the last one plus the step.  Taken from the frame's place, the step counted the part of the
     # last one the vehicle had yet to fly (or had overshot) twice: the frame is taken within the arrival tolerance
-    # (0.06 m; a step shorter than that "arrives" at once), and the next waypoint went that far past the opening's
+    # (up to 0.06 m, companion.mission), and the next waypoint went that far past the opening's
     # centre (measured, hard world seed 77, hard_0602231812: 1.0 m from the wall, 0.10-0.16 m swings across a
     # 0.05 m wide centre for 17 steps, then "could not centre"; in seeds 76 and 77, the frame's place across was
     # 0.024 m from the waypoint at the median of 3,161 metric steps, over 0.03 m in 42 % of them).

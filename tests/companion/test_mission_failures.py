@@ -293,8 +293,8 @@ def test_a_frame_pair_taken_without_moving_is_not_looked_at(tmp_path):
     """MissionConfig.min_baseline_m: a camera that did not move between two frames shows no parallax, and the
     detector finds "openings" in its flow's noise (measured, hard world seed 43: a pair 0.01 m apart showed a
     61 % "opening", and the vehicle pushed into the wall).  Such a pair is not looked at: nothing is seen, nothing
-    pushed; with no minimum the same pairs reach the detector, and the mission steers by its "opening" (and
-    pushed through it at the end of its steps, before no look pushed what it never placed)."""
+    pushed; with no minimum the same pairs reach the detector, and the mission steers by its "opening" until its
+    steps run out (before 2026-12-05 it then pushed through it; now no look pushes what it never placed)."""
     detector = HalfTheFrame()
     result, _ = _fly_stuck(tmp_path / "still", detector)
     assert detector.looked == 0 and result.state is State.REFUSED
