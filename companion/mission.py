@@ -28,13 +28,12 @@ from companion.look import across_heading, along_heading, next_look_step, see_fr
 from companion.motion import off_heading, tilted_pixel
 from companion.opening import OpeningConfig, OpeningTracker
 from companion.perception import perceive
+from companion.push import clamped_bias, push_length, push_waypoints, square_crossing
 from companion.runlog import RunLog
 from companion.search import look_places, search_wall_bound, search_wall_ceiling
 from companion.servo import (
     ServoConfig,
     heading_to_ned,
-    push_length,
-    push_waypoints,
     servo_step,
 )
 from companion.storyboard import Storyboard, StoryRow, step_text
@@ -115,6 +114,7 @@ class MissionResult:
     far_distance_m: float | None = None
     push_length_m: float | None = None
     heading_rad: float | None = None    # the heading flown along (NED yaw): the yaw at the offboard start
+    wall_turn_rad: float | None = None  # the wall's turn against the heading at the push, as measured
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -173,9 +173,9 @@ class Mission:
             self.link.start_offboard(start, self.yaw)
             self._recorded_setpoint(start)
             self._enter(State.SERVO)
-            waypoint, bias, wall_distance = self._servo_searching(start)
+            waypoint, bias, wall_distance, turn = self._servo_searching(start)
             self._enter(State.TRAVERSE)
-            self._traverse(waypoint, bias, wall_distance, self.result.far_distance_m)
+            self._traverse(waypoint, bias, wall_distance, self.result.far_distance_m, turn)
             if self.config.finish == "land":
                 self._enter(State.LAND)
                 self.link.land()
@@ -276,7 +276,8 @@ class Mission:
 
     def _servo(self, start, avoid: tuple = (), wall_prior: float | None = None, reach=None,
                wall_ceiling: float | None = None):
-        """Servo steps until push; returns (where the push starts, lateral/vertical bias, wall distance).
+        """Servo steps until push; returns (where the push starts, lateral/vertical bias, wall distance, the wall's
+        turn against the heading or None).
         ``avoid``: places of openings refused before; ``wall_prior``: the nearest the wall's face can be (forward
         coordinate), from earlier looks: no blind step goes nearer than the hold distance to it; ``reach``: (right,
         metres), a look's bound on the openings it takes (companion.opening), and then no push without a clear
@@ -376,7 +377,7 @@ class Mission:
                 "no_gap_reason": detection.reason, "area_frac": view.area_frac,
                 "error": next_step.error, "next_delta_heading": next_step.delta_heading, "close": next_step.close,
                 "push": next_step.push, "wall_distance_m": view.measured, "far_distance_m": view.far,
-                "wall_patches": [round(r, 3) for r in view.wall_patches],
+                "wall_patches": [round(r, 3) for r in view.wall_patches], "wall_turn_rad": view.wall_yaw,
                 "offset_m": next_step.offset_m, "tolerance_m": next_step.tolerance_m, "aligned": next_step.aligned,
                 "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": seen.flow_ms,
                            "detect_ms": seen.detect_ms},
@@ -412,7 +413,8 @@ class Mission:
         # its way to (within the arrival tolerance): its last correction, the wall's and the far surface's
         # distances were all measured from there (measured, hard world seed 44: started from the waypoint
         # 0.04 m aside, a push through a polygon 0.26 m clear touched its edge).
-        return tuple(prev_position), step.delta_heading[1:], wall_distance
+        self.result.wall_turn_rad = wall.turn
+        return tuple(prev_position), step.delta_heading[1:], wall_distance, wall.turn
 
     def _send(self, waypoint) -> None:
         self.link.set_position_target(waypoint, self.yaw)
@@ -467,12 +469,15 @@ class Mission:
     def _across(self, position) -> tuple[float, float]:
         return across_heading(position, self.yaw)
 
-    def _traverse(self, start, bias, wall_distance, far_distance=None) -> None:
+    def _traverse(self, start, bias, wall_distance, far_distance=None, turn=None) -> None:
         length = push_length(wall_distance, self.servo, far_distance)
         self.result.push_length_m = length
-        log.info("traversal: %.2f m forward in %.2f m increments (wall measured at %s m, beyond it %s m)", length,
-                 self.servo.push_increment_m, _fmt(wall_distance), _fmt(far_distance))
-        points = push_waypoints(start, self.yaw, length, bias, self.servo)
+        points = push_waypoints(start, self.yaw, length, bias, self.servo, wall_distance, turn)
+        square = square_crossing(length, clamped_bias(bias, self.servo), wall_distance, turn, self.servo) is not None
+        log.info("traversal: %.2f m forward in %.2f m increments (wall measured at %s m%s, beyond it %s m)%s", length,
+                 self.servo.push_increment_m, _fmt(wall_distance),
+                 "" if turn is None else f", turned {math.degrees(turn):.1f}°", _fmt(far_distance),
+                 ", square to the wall" if square else "")
         period = 1.0 / 20.0  # one increment per setpoint period: ~1 m/s, level
         for p in points:
             self._send(p)

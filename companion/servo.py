@@ -211,39 +211,6 @@ def heading_to_ned(delta: tuple[float, float, float], yaw: float) -> tuple[float
     return (c * f - s * r, s * f + c * r, d)
 
 
-def push_length(wall_distance_m: float | None, config: ServoConfig = ServoConfig(),
-                far_distance_m: float | None = None) -> float:
-    """How far to traverse: past the wall's back face by the margin, bounded so as not to fly on into
-    whatever stands behind the opening: with the far surface's distance measured, the push ends with the
-    body sphere ``far_margin_m`` short of it (but never short of the wall's front face plus the body's
-    radius, which the crossing needs)."""
-    if wall_distance_m is None or not math.isfinite(wall_distance_m) or wall_distance_m <= 0:
-        return config.push_default_m
-    beyond = min(config.push_margin_m, config.push_max_beyond_wall_m)
-    length = wall_distance_m + config.wall_thickness_m + beyond
-    if far_distance_m is not None and math.isfinite(far_distance_m):
-        stop = far_distance_m - config.body_radius_m - config.far_margin_m
-        length = max(min(length, stop), wall_distance_m + config.body_radius_m)
-    return length
-
-
-def push_waypoints(start: tuple[float, float, float], yaw: float, length_m: float,
-                   bias: tuple[float, float], config: ServoConfig = ServoConfig()) -> list[tuple[float, float, float]]:
-    """docs/design.md step 8: N_f forward increments of 0.05 m, spreading the last small lateral/vertical bias
-    correction over the first half of the push, level flight (position setpoints only)."""
-    n = max(1, int(math.ceil(length_m / config.push_increment_m)))
-    limit = config.lateral_clamp_far_m  # "small" bias corrections: never more than an early servo step
-    bias = (float(np.clip(bias[0], -limit, limit)), float(np.clip(bias[1], -limit, limit)))
-    half = max(1, n // 2)
-    points, p = [], start
-    for i in range(n):
-        share = 1.0 / half if i < half else 0.0
-        step = heading_to_ned((config.push_increment_m, bias[0] * share, bias[1] * share), yaw)
-        p = (p[0] + step[0], p[1] + step[1], p[2] + step[2])
-        points.append(p)
-    return points
-
-
 def far_distance_from_flow(flow: np.ndarray, gap_mask: np.ndarray, translation_m: float,
                            erode_px: int = 4) -> float | None:
     """Metric distance to the far surface seen through the opening, by the same parallax as the wall's:

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.servo import ServoConfig, heading_to_ned, normalised_error, push_length, push_waypoints, servo_step
+from companion.push import push_length, push_waypoints
+from companion.servo import ServoConfig, heading_to_ned, normalised_error, servo_step
 
 W, H = 320, 240
 F = 156.4  # px: the default camera, vertical FOV 75° over 240 px

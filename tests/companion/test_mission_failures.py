@@ -593,7 +593,7 @@ def test_the_push_starts_where_the_vehicle_was_at_the_last_frame_not_at_its_wayp
     frames = []
     capture = mission.camera.capture
     mission.camera.capture = lambda: frames.append(link.telemetry.position) or capture()
-    start, _, wall_distance = mission._servo((0.0, 0.0, -1.5))
+    start, _, wall_distance, _ = mission._servo((0.0, 0.0, -1.5))
     assert wall_distance is not None                                  # placed by the metric law, then pushed
     assert start == pytest.approx(frames[-1])                         # from where the last frame was taken
     assert math.dist(link.setpoints[-1], frames[-1]) > 0.02           # ... not from the waypoint ahead of it
