@@ -169,6 +169,16 @@ def test_a_search_sets_refused_openings_aside_and_takes_none_beyond_its_reach():
     for _ in range(3):
         seen = avoiding.observe([cand(left), cand(right)], (0.0, 0.0), distance, F, W, H)
     assert seen.detection is left and seen.offset_m[0] == pytest.approx(across(left), abs=0.02)
+    # followed in the image before the wall's distance placed it, the refused one is let go once it does
+    late = OpeningTracker(avoid=(refused_right,))
+    for _ in range(2):
+        assert late.observe([cand(right)], (0.0, 0.0), None, F, W, H).offset_m is None
+    assert late.pixels.used == pytest.approx(right.clear_centre)
+    seen = late.observe([cand(right)], (0.0, 0.0), distance, F, W, H)
+    assert seen.detection is None and seen.offset_m is None and late.world.used is None
+    for _ in range(2):
+        seen = late.observe([cand(left), cand(right)], (0.0, 0.0), distance, F, W, H)
+    assert seen.detection is left and seen.offset_m[0] == pytest.approx(across(left), abs=0.02)
     # a look from 1.5 m right: only openings within 1.2 m across of it count; the left one is 2.2 m away
     assert abs(across(left) - 1.5) > 1.2
     reaching = OpeningTracker(reach=(1.5, 1.2))
