@@ -225,7 +225,7 @@ class OpeningTracker:
                 candidates = [c for c in candidates
                               if all(math.dist(place(c.target_px), a) > self.config.world_gate_m for a in self.avoid)]
                 # Followed in the image before the wall's distance could place it, a refused opening is let go
-                # (measured, hard world seeds 67 and 77: looks of the search centred on the opening they had been
+                # (measured, hard world seeds 67, 77 and 78: looks of the search centred on the opening they had been
                 # sent away from, never judged again, until their 30 steps ran out)
                 if self.world.used is None and self.pixels.used is not None and any(
                         math.dist(place(self.pixels.used), a) <= self.config.world_gate_m for a in self.avoid):
