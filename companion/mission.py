@@ -28,7 +28,7 @@ from companion.look import across_heading, along_heading, next_look_step, see_fr
 from companion.motion import off_heading, tilted_pixel
 from companion.opening import OpeningConfig, OpeningTracker
 from companion.perception import perceive
-from companion.push import clamped_bias, push_length, push_waypoints, square_crossing
+from companion.push import push_length, push_path
 from companion.runlog import RunLog
 from companion.search import look_places, search_wall_bound, search_wall_ceiling
 from companion.servo import (
@@ -472,8 +472,7 @@ class Mission:
     def _traverse(self, start, bias, wall_distance, far_distance=None, turn=None) -> None:
         length = push_length(wall_distance, self.servo, far_distance)
         self.result.push_length_m = length
-        points = push_waypoints(start, self.yaw, length, bias, self.servo, wall_distance, turn)
-        square = square_crossing(length, clamped_bias(bias, self.servo), wall_distance, turn, self.servo) is not None
+        points, square = push_path(start, self.yaw, length, bias, self.servo, wall_distance, turn)
         log.info("traversal: %.2f m forward in %.2f m increments (wall measured at %s m%s, beyond it %s m)%s", length,
                  self.servo.push_increment_m, _fmt(wall_distance),
                  "" if turn is None else f", turned {math.degrees(turn):.1f}°", _fmt(far_distance),

@@ -46,12 +46,19 @@ def push_waypoints(start: Point3, yaw: float, length_m: float, bias: tuple[float
     distance and a turn beyond :data:`~companion.servo.TURN_NEGLIGIBLE_RAD` (:func:`square_crossing`): on to the
     line square to the wall through the aim, then along it, in increments of at most 0.05 m; the push ends as far
     from the wall as the straight one would."""
+    return push_path(start, yaw, length_m, bias, config, wall_distance_m, turn_rad)[0]
+
+
+def push_path(start: Point3, yaw: float, length_m: float, bias: tuple[float, float],
+              config: ServoConfig = DEFAULT_SERVO, wall_distance_m: float | None = None,
+              turn_rad: float | None = None) -> tuple[list[Point3], bool]:
+    """:func:`push_waypoints`, and whether they cross the wall square to its face."""
     bias = clamped_bias(bias, config)
     path = square_crossing(length_m, bias, wall_distance_m, turn_rad, config)
     if path is None:
-        return _straight_push(start, yaw, length_m, bias, config.push_increment_m)
+        return _straight_push(start, yaw, length_m, bias, config.push_increment_m), False
     return [tuple(s + d for s, d in zip(start, heading_to_ned(tuple(p), yaw), strict=True))
-            for p in _resample(path, config.push_increment_m)]
+            for p in _resample(path, config.push_increment_m)], True
 
 
 def clamped_bias(bias: tuple[float, float], config: ServoConfig = DEFAULT_SERVO) -> tuple[float, float]:
