@@ -38,6 +38,8 @@ log = logging.getLogger("flowgap.eval_masks")
 
 DEFAULT_BACKENDS = ("dis:fast", "dis:medium", "dis:fine", "farneback", "groundtruth", "raft")
 DEFAULT_DETECTORS = ("paper", "parallax", "parallax_known")
+# ... and on request "parallax_end": the parallax detector with ParallaxGapConfig.past_the_end on (off as flown)
+DETECTORS = (*DEFAULT_DETECTORS, "parallax_end")
 GOALS = {"dis_median_iou": 0.85, "dis_detection_rate": 0.95, "best_median_iou": 0.90, "best_min_scene_iou": 0.75}
 
 
@@ -117,17 +119,17 @@ def camera_translation(camera, pose1, pose2) -> tuple[float, float, float]:
 
 
 def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2):
-    from companion.gap import CameraMotion, detect_gap, detect_gap_parallax
+    from companion.gap import CameraMotion, ParallaxGapConfig, detect_gap, detect_gap_parallax
 
     if name == "paper":
         return detect_gap(flow)
-    if name == "parallax":
-        return detect_gap_parallax(flow, motion=CameraMotion(focal_px=camera.fy,
-                                                             principal_point=_cv_pp(camera)))
+    if name in ("parallax", "parallax_end"):
+        return detect_gap_parallax(flow, ParallaxGapConfig(past_the_end=name == "parallax_end"),
+                                   motion=CameraMotion(focal_px=camera.fy, principal_point=_cv_pp(camera)))
     if name == "parallax_known":
         motion = CameraMotion(camera_translation(camera, pose1, pose2), camera.fy, _cv_pp(camera))
         return detect_gap_parallax(flow, motion=motion)
-    raise KeyError(f"unknown detector {name!r}; choose from {DEFAULT_DETECTORS}")
+    raise KeyError(f"unknown detector {name!r}; choose from {DETECTORS}")
 
 
 def _cv_pp(camera) -> tuple[float, float]:
@@ -356,7 +358,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="flow backends, 'dis:<preset>' / 'raft:<variant>' allowed (default: %(default)s); "
                              "a backend that cannot be built (e.g. RAFT without weights) is skipped and reported")
     parser.add_argument("--detectors", nargs="*", default=list(DEFAULT_DETECTORS),
-                        help="gap detectors (default: %(default)s)")
+                        help="gap detectors (default: %(default)s; 'parallax_end': the parallax detector looking "
+                             "past the wall's end too, ParallaxGapConfig.past_the_end)")
     parser.add_argument("--raft-weights", type=Path, default=None, help="RAFT weights file (default: backend's)")
     parser.add_argument("--raft-iters", type=int, default=None,
                         help="RAFT iterations (default: the weights file's own setting)")

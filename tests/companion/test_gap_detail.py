@@ -675,7 +675,8 @@ def test_parallax_detector_untrusted_border_of_one_pixel():
     # a 1 px frame of very far flow (ρ = 0.01) round a wall with a gap (ρ 0.5 and 0.25): with border_px = 1 it is
     # ignored and the gap found; read, the frame is the sharpest depth step but no hole in anything: no opening,
     # unless every step is tried with the edge at the blend's midpoint, unbounded (the frame's far side then takes
-    # in the gap, a quarter of the wall's ρ), when the gap is found after it
+    # in the gap, a quarter of the wall's ρ), when the gap is found after it, or the frame is set aside as what
+    # lies past the wall's end (past_the_end, off by default)
     far = box(30, 20, 50, 40)
     frame = ~box(1, 1, W - 1, H - 1)
     flow = lateral_flow(far)
@@ -684,9 +685,11 @@ def test_parallax_detector_untrusted_border_of_one_pixel():
     assert res.found and iou(res.mask, far) > 0.9
     img = np.where(frame, 0, np.where(far, 120, 200)).astype(np.uint8)
     assert far_region(img, np.log(50.0) / 200, far_config())[0][0, 0]        # the frame's step is the sharpest
-    assert not detect_gap_parallax(flow, ParallaxGapConfig(border_px=0), motion=LATERAL).found
+    assert not detect_gap_parallax(flow, ParallaxGapConfig(border_px=0, past_the_end=False), motion=LATERAL).found
     res = detect_gap_parallax(flow, ParallaxGapConfig(border_px=0, every_step=True, edge_blend=0.5,
-                                                    edge_blend_reach_px=None), motion=LATERAL)
+                                                    edge_blend_reach_px=None, past_the_end=False), motion=LATERAL)
+    assert res.found and iou(res.mask, far) > 0.9
+    res = detect_gap_parallax(flow, ParallaxGapConfig(border_px=0, past_the_end=True), motion=LATERAL)
     assert res.found and iou(res.mask, far) > 0.9
 
 
@@ -949,3 +952,27 @@ def test_every_step_looks_beyond_the_next_step_when_the_sharpest_hides_no_hole()
     assert not detect_gap_parallax(flow, ParallaxGapConfig(**cfg), motion=LATERAL).found
     res = detect_gap_parallax(flow, ParallaxGapConfig(every_step=True, **cfg), motion=LATERAL)
     assert res.found and iou(res.mask, gap) > 0.9
+
+
+def test_what_lies_past_the_walls_end_is_set_aside_and_the_opening_found_in_the_rest():
+    """ParallaxGapConfig.past_the_end (off by default): seen past the wall's end (here its left third, 25 times as
+    deep as the wall), the empty space is the sharpest depth step, reaches the image's border and holds no hole;
+    set aside, the rest (the wall and an opening at half its inverse depth) is split again and the opening found.
+    Without an opening nothing is found, and a far region that touches what was set aside is no hole in the wall."""
+    past, gap = box(0, 0, 28, H), box(45, 18, 65, 38)
+    rho = np.where(past, 0.02, np.where(gap, 0.25, 0.5))
+    flow = np.zeros((H, W, 2), np.float32)
+    flow[..., 0] = -rho * F
+    assert not ParallaxGapConfig().past_the_end
+    on = ParallaxGapConfig(past_the_end=True)
+    assert not detect_gap_parallax(flow, ParallaxGapConfig(), motion=LATERAL).found
+    res = detect_gap_parallax(flow, on, motion=LATERAL)
+    assert res.found and iou(res.mask, gap) > 0.9
+    # no opening: the wall alone beside the empty space
+    flow[..., 0] = -np.where(past, 0.02, 0.5) * F
+    none = detect_gap_parallax(flow, on, motion=LATERAL)
+    assert not none.found and "enclosed by a nearer surface" in none.reason
+    # a far patch against the wall's end (a notch of its edge seen as deep as an opening) is no hole either
+    notch = box(28, 18, 40, 38)
+    flow[..., 0] = -np.where(past, 0.02, np.where(notch, 0.25, 0.5)) * F
+    assert not detect_gap_parallax(flow, on, motion=LATERAL).found
