@@ -473,10 +473,12 @@ class Mission:
         length = push_length(wall_distance, self.servo, far_distance)
         self.result.push_length_m = length
         points, square = push_path(start, self.yaw, length, bias, self.servo, wall_distance, turn)
-        log.info("traversal: %.2f m forward in %.2f m increments (wall measured at %s m%s, beyond it %s m)%s", length,
+        # the square path's length along the heading is the straight push's; it flies a little further
+        flown = sum(math.dist(a, b) for a, b in zip([start, *points[:-1]], points, strict=True))
+        log.info("traversal: %.2f m ahead along the heading%s in %.2f m increments (wall measured at %s m%s, beyond "
+                 "it %s m)", length, f", {flown:.2f} m flown square to the wall" if square else "",
                  self.servo.push_increment_m, _fmt(wall_distance),
-                 "" if turn is None else f", turned {math.degrees(turn):.1f}°", _fmt(far_distance),
-                 ", square to the wall" if square else "")
+                 "" if turn is None else f", turned {math.degrees(turn):.1f}°", _fmt(far_distance))
         period = 1.0 / 20.0  # one increment per setpoint period: ~1 m/s, level
         for p in points:
             self._send(p)

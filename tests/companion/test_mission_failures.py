@@ -3,12 +3,15 @@ reason, and the vehicle is asked to hold whenever it may be in the air (never on
 
 from __future__ import annotations
 
+import logging
+import math
 import threading
 
 import numpy as np
 import pytest
 
 from companion.camera import Frame
+from companion.clock import _ClockBase
 from companion.link.base import AutopilotLink, LinkError
 from companion.mission import Mission, MissionConfig, State
 from companion.runlog import RunLog
@@ -597,3 +600,41 @@ def test_the_push_starts_where_the_vehicle_was_at_the_last_frame_not_at_its_wayp
     assert wall_distance is not None                                  # placed by the metric law, then pushed
     assert start == pytest.approx(frames[-1])                         # from where the last frame was taken
     assert math.dist(link.setpoints[-1], frames[-1]) > 0.02           # ... not from the waypoint ahead of it
+
+
+def test_a_push_square_to_a_turned_wall_logs_the_length_it_flies_besides_its_depth(tmp_path, caplog):
+    """The traversal's log line: the push's length along the heading, and for a path that turns square to the wall
+    the longer length it flies (it ends as deep past the wall as the straight push would)."""
+    class SimulatedTime(_ClockBase):
+        """Time that passes only when slept (the push's setpoints are 50 ms apart)."""
+
+        def __init__(self) -> None:
+            self.t = 0.0
+
+        def now(self) -> float:
+            return self.t
+
+        def sleep_until(self, t: float) -> None:
+            self.t = max(self.t, t)
+
+    def line_of(turn):
+        link = RecordingLink()
+        link.clock = SimulatedTime()
+        mission = Mission(link, StillCamera(), None, None, RunLog(tmp_path, images=False))
+        mission.yaw = 0.0
+        caplog.clear()
+        with caplog.at_level(logging.INFO, logger="companion.mission"):
+            mission._traverse((0.0, 0.0, -1.5), (0.0, 0.0), 1.2, None, turn)
+        mission.runlog.close()
+        start = (0.0, 0.0, -1.5)
+        flown = sum(math.dist(a, b) for a, b in zip([start, *link.setpoints[:-1]], link.setpoints, strict=True))
+        return next(r.getMessage() for r in caplog.records if r.getMessage().startswith("traversal:")), \
+            mission.result.push_length_m, flown
+
+    square, length, flown = line_of(math.radians(15.0))
+    assert flown > length + 0.005
+    assert square.startswith(f"traversal: {length:.2f} m ahead along the heading, {flown:.2f} m flown square to the "
+                             "wall in ")
+    straight, length, flown = line_of(None)
+    assert flown == pytest.approx(length, abs=1e-6)
+    assert straight.startswith(f"traversal: {length:.2f} m ahead along the heading in ")
