@@ -204,8 +204,8 @@ class ParallaxGapConfig:
                                       # the deepest thing in view) and look for a hole in the rest, beyond each
                                       # significant step (see _holes_past_the_end).  Off: it lifts RAFT's masks
                                       # (random seeds 7 and 8: 90.8 -> 94.6 % and 92.4 -> 93.4 % detected), but
-                                      # flown on hard-world seeds 78 and 79 it gave 97 and 95/100 for 98 and 96
-                                      # (other flights, other near-threshold judgements; docs/perception.md)
+                                      # flown on hard-world seeds 67, 77, 78 and 79 it lost one or two flights on
+                                      # each (other flights, other near-threshold judgements; docs/perception.md)
     past_the_end_reach_px: int = 3    # ... set aside with this many pixels of their blurred edge
     # Where the image has texture (textured_pixels): flow elsewhere (the empty space beyond a wall's end, a plain
     # surface) is filled in from the region's edges and says nothing of its depth.
