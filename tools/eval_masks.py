@@ -124,7 +124,9 @@ def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2):
     if name == "paper":
         return detect_gap(flow)
     if name in ("parallax", "parallax_end"):
-        return detect_gap_parallax(flow, ParallaxGapConfig(past_the_end=name == "parallax_end"),
+        # "parallax" is the detector as flown, whatever its defaults; "parallax_end" that with past_the_end on
+        config = ParallaxGapConfig(past_the_end=True) if name == "parallax_end" else ParallaxGapConfig()
+        return detect_gap_parallax(flow, config,
                                    motion=CameraMotion(focal_px=camera.fy, principal_point=_cv_pp(camera)))
     if name == "parallax_known":
         motion = CameraMotion(camera_translation(camera, pose1, pose2), camera.fy, _cv_pp(camera))
