@@ -7,7 +7,8 @@
   in front of the camera, and agrees with image 2's depth at that pixel (within ``depth_tol``, relative),
   so occluded and disoccluded pixels are invalid.
 * ``load_collision``: the vehicle's collision geometry (see :mod:`scenes.collision`).
-* ``corridor_clearance`` / ``passable_openings``: whether a body fits through an opening, flying along a heading.
+* ``corridor_clearance`` / ``passable_openings``: whether a body fits through an opening, flying along a heading
+  (by default, for ``passable_openings``, square to the wall's face: the widest straight path through it).
 """
 
 from __future__ import annotations
@@ -145,7 +146,10 @@ def corridor_clearance(spec: SceneSpec, index: int, heading_rad: float | None = 
 
 
 def passable_openings(spec: SceneSpec, body_radius_m: float, margin_m: float,
-                      heading_rad: float | None = None) -> list[bool]:
+                      heading_rad: float | None = 0.0) -> list[bool]:
     """Per opening: whether a sphere of ``body_radius_m`` with ``margin_m`` to spare on every side fits through
-    it flying along the heading (:func:`corridor_clearance`)."""
+    it flying along ``heading_rad`` (:func:`corridor_clearance`; None: the scene's start heading).  The default, 0,
+    is square to the wall's face: the widest straight path through an opening (any other is the opening
+    intersected with itself shifted by thickness·tan(heading)), and the one a companion that crosses a turned wall
+    square to its face takes."""
     return [corridor_clearance(spec, i, heading_rad) >= body_radius_m + margin_m for i in range(len(spec.openings))]

@@ -12,7 +12,8 @@ after exposure. Their specs are saved under ``OUT/scenes`` so any flight can be 
 --scene OUT/scenes/NAME.json``. Several flights run at once on their own ports (PX4 instance numbers).
 
 Each row says whether the scene had an opening the vehicle fits through (``passable``: its body sphere plus
-the margin, flying along its heading, ``scenes.groundtruth.passable_openings``) and whether the companion
+the margin, crossing square to the wall's face, the widest straight path through it,
+``scenes.groundtruth.passable_openings``) and whether the companion
 declined (``refused``: it held, and the vehicle touched nothing). A flight succeeds when it crossed the wall
 through an opening without touching anything, or, where no opening was passable, when it refused.
 Flights run in lockstep (the vehicle advances only when its companion waits), so the same seed gives the same
@@ -401,7 +402,8 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
         print(f"flowgap-eval-flights: error: a flight raised ({exc}); fix it and rerun with --resume to fly the "
               f"rest", file=sys.stderr)
         return 1
-    rows = sorted(outcome.rows, key=lambda r: (r["scene"], r["start_index"]))
+    # judged again with today's labels: a row reused by --resume keeps how it was flown, not how it was judged
+    rows = sorted((judge(r, passable[r["scene"]]) for r in outcome.rows), key=lambda r: (r["scene"], r["start_index"]))
     summary = summarise(rows)
     summary.update(world=args.world, flow=args.flow, detector=args.detector,
                    clock="realtime" if args.realtime else "lockstep",

@@ -317,7 +317,7 @@ def test_a_slot_in_a_turned_wall_is_seen_as_wide_as_ray_casting_says(turn_deg):
         assert seen_slot_width(half_width, distance, turn, thickness) == pytest.approx(expected, abs=2e-4)
 
 
-def test_the_turned_wall_stretch_gives_the_corridor_along_the_heading():
+def test_the_turned_wall_stretch_gives_the_slots_own_width_the_corridor_square_to_the_face():
     import math
 
     from companion.opening import seen_slot_width, turned_wall_stretch
@@ -326,16 +326,18 @@ def test_the_turned_wall_stretch_gives_the_corridor_along_the_heading():
     for turn_deg in (5.0, 12.0, -18.0):
         turn = math.radians(turn_deg)
         seen_m = seen_slot_width(0.25, 1.2, turn, 0.2) * (1.2 + 0.2)             # scaled by the back face's depth
-        corridor = 0.5 - 0.2 * math.tan(abs(turn))                              # the slot less what the depth hides
-        assert turned_wall_stretch(0.25, 1.2, turn, 0.2) * seen_m == pytest.approx(corridor)
-        # 1/cos(turn) takes the near side, bounded by the nearer front face, as if at the back face's depth
-        assert turned_wall_stretch(0.25, 1.2, turn, 0.2) < 1.0 / math.cos(turn)
+        # the push crosses a turned wall square to its face (companion.push): the slot's whole 0.5 m, not the
+        # 0.5 - 0.2·tan(turn) a body flying on along the heading has
+        assert turned_wall_stretch(0.25, 1.2, turn, 0.2) * seen_m == pytest.approx(0.5)
+        assert turned_wall_stretch(0.25, 1.2, turn, 0.2) * seen_m > 0.5 - 0.2 * math.tan(abs(turn)) + 0.015
 
 
 def test_a_rendered_slot_in_a_turned_wall_is_judged_as_one_in_a_wall_facing_the_camera():
     """Ground-truth masks of rendered slots, scaled as the tracker scales a mask, over
-    scenes.groundtruth.corridor_clearance: with the turned-wall stretch the ratio at 16° is the facing wall's
-    (which is a pixel short: the mask inset's business); with 1/cos(turn) it came out 11 % higher."""
+    scenes.groundtruth.corridor_clearance square to the wall, for a slot as wide as the fit decision turns on: with
+    the turned-wall stretch the ratio at 16° is the facing wall's (which is a pixel short: the mask inset's
+    business); with 1/cos(turn) it comes out 3 % lower (judged along the heading, the corridor the thickness
+    narrows, it came out 11 % higher)."""
     import math
 
     from companion.opening import in_wall, turned_wall_stretch
@@ -351,17 +353,17 @@ def test_a_rendered_slot_in_a_turned_wall_is_judged_as_one_in_a_wall_facing_the_
     def judged_over_truth(turn_deg, stretch_of):
         turn = math.radians(turn_deg)
         spec = SceneSpec(wall=WallSpec(distance=3.0, thickness=thickness),
-                         openings=(OpeningSpec("rect", center=(0.0, -1.5), size=(0.52, 1.0)),), start_yaw_deg=turn_deg)
+                         openings=(OpeningSpec("rect", center=(0.0, -1.5), size=(0.48, 1.0)),), start_yaw_deg=turn_deg)
         position = (3.0 - ahead * math.cos(turn), -ahead * math.sin(turn), -1.5)   # on the heading, centred
         attitude = (math.cos(turn / 2), 0.0, 0.0, math.sin(turn / 2))
         mask = gap_mask_from_labels(render_splats(build_scene(spec), camera, Pose(position, attitude)).label)
-        return in_wall(mask, stretch_of(turn))[1] * (ahead + thickness) / focal / corridor_clearance(spec, 0)
+        return in_wall(mask, stretch_of(turn))[1] * (ahead + thickness) / focal / corridor_clearance(spec, 0, 0.0)
 
     facing = judged_over_truth(0.0, lambda turn: 1.0)
     assert 0.9 < facing < 1.0
     assert judged_over_truth(16.0, lambda turn: turned_wall_stretch(0.24, ahead, turn, thickness)) == pytest.approx(
         facing, abs=0.03)
-    assert judged_over_truth(16.0, lambda turn: 1.0 / math.cos(turn)) > facing + 0.1
+    assert judged_over_truth(16.0, lambda turn: 1.0 / math.cos(turn)) < facing - 0.02
 
 
 def test_an_alternative_placed_where_the_tracked_one_once_was_is_the_tracked_one():

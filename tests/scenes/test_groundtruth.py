@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import cv2
@@ -415,6 +416,10 @@ def test_passable_openings_compares_the_clearance_with_radius_plus_margin():
     assert passable_openings(spec, c1h, 0.0, heading) == [True, True]
     assert passable_openings(spec, c1h + 0.01, 0.0, heading) == [True, False]
     assert passable_openings(spec, c1h + 0.01, 0.0) == [True, True]  # the default heading is 0 here
+    # ... and square to the wall's face whatever the start heading: the widest straight path through it
+    turned = dataclasses.replace(spec, start_yaw_deg=20.0)
+    assert passable_openings(turned, c1h + 0.01, 0.0) == [True, True]
+    assert passable_openings(turned, c1h + 0.01, 0.0, None) == [True, False]     # along the start heading
     assert passable_openings(SceneSpec(openings=()), 0.1, 0.0) == []
 
 

@@ -67,8 +67,8 @@ def test_corridor_clearance_is_the_inscribed_circle_narrowed_by_the_slant_throug
     assert corridor_clearance(slot, 0) == pytest.approx(0.225, abs=0.006)
     assert passable_openings(slot, 0.19, 0.05) == [False] and passable_openings(square, 0.19, 0.05) == [True]
     turned = SceneSpec(openings=(OpeningSpec("rect", center=(0.0, -1.5), size=(0.52, 0.52)),), start_yaw_deg=20.0)
-    assert passable_openings(turned, 0.19, 0.05) == [False]      # fits head-on (0.26), not slanted (0.233)
-    assert passable_openings(turned, 0.19, 0.05, heading_rad=0.0) == [True]
+    assert passable_openings(turned, 0.19, 0.05, heading_rad=None) == [False]   # not along the start heading (0.233)
+    assert passable_openings(turned, 0.19, 0.05) == [True]       # square to the wall, the default: 0.26
 
 
 def test_a_scene_with_a_start_heading_round_trips_and_a_sideways_one_is_refused():

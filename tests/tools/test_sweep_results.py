@@ -146,3 +146,30 @@ def test_scene_files_travel_by_value_and_suite_scenes_by_name(tmp_path):
     assert materialise_scene("window1_brick", {}, tmp_path / "w") == "window1_brick"
     written = Path(materialise_scene(str(spec), payload, tmp_path / "worker"))
     assert written.parent == tmp_path / "worker" and written.read_bytes() == spec.read_bytes()
+
+
+def test_a_resumed_sweep_judges_its_reused_rows_by_todays_passable_rule(tmp_path, monkeypatch):
+    """A row saved by an earlier sweep keeps how it was flown, not how it was judged: a 0.50 m slot in a 0.2 m wall
+    turned 16° was impassable along the start heading (0.44 m left) and is passable square to the wall, so the
+    crossing its saved row records is a success now."""
+    import tools.sweep_results as sweep_results
+    from scenes.spec import OpeningSpec, SceneSpec, WallSpec
+    from tools.eval_flights import main
+
+    spec = SceneSpec(name="turned_slot", wall=WallSpec(thickness=0.2),
+                     openings=(OpeningSpec("rect", center=(0.0, -1.5), size=(0.5, 1.0)),), start_yaw_deg=16.0)
+    spec.save(tmp_path / "turned_slot.json")
+    saved = {"scene": "turned_slot", "start_index": 0, "crossed_wall": True, "collision": False, "refused": False,
+             "passable": False, "through": True, "success": False, "servo_steps": 12, "sim_time_s": 16.0,
+             "wall_time_s": 24.0, "min_clearance_m": 0.055, "node": "vm"}
+
+    def reused(jobs, executor, make_row, out, settings, resume=False, progress=True):
+        assert resume and [job.label for job in jobs] == ["turned_slot"]
+        return sweep_results.SweepOutcome([dict(saved)], 1, 0, [])
+
+    monkeypatch.setattr(sweep_results, "run_sweep", reused)
+    out = tmp_path / "out"
+    assert main([str(tmp_path / "turned_slot.json"), "--starts", "1", "--resume", "--out", str(out)]) == 0
+    flights = json.loads((out / "flights.json").read_text())
+    assert [(r["passable"], r["success"]) for r in flights["rows"]] == [(True, True)]
+    assert (flights["summary"]["passable"], flights["summary"]["success"]) == (1, 1)
