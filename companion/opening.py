@@ -288,7 +288,16 @@ class OpeningTracker:
         # which opening it is, the image tracker decides (τ_c, confirmation); the world tracker, fed with
         # that one's place, rejects a place that jumps and takes it after two that agree
         chosen = next((cp for cp in placed if cp[0] is pick), None) if self.pixels.last_accepted else None
+        before_m = self.world.used
         self.world.update(chosen[1] if chosen is not None else None)
+        if (self.world.last_accepted and before_m is not None
+                and math.dist(self.world.used, before_m) > self.config.world_gate_m):
+            # A jump two sightings confirmed: what was placed before is another thing (or a worse estimate of this
+            # one), and the median of both kinds of place lies on neither (measured, hard world seed 80,
+            # hard_1468430193: a blob on the wall placed first, then the opening 1.2 m from it; the vehicle
+            # centred on the wall halfway between, blobs there confirmed that place, the push met the opening's edge)
+            self.radii, self.close_radii, self.places, self.radius_trail = [], [], [], []
+            self.close_places = 0
         self._remember([cp for cp in placed if chosen is None or cp[0] is not chosen[0]], radius_m)
         estimated = chosen is not None and self.world.last_accepted
         if estimated:

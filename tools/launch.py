@@ -10,6 +10,7 @@ fault relay (:mod:`tools.link_relay`) sits on the API link between them, like a 
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import logging
 import signal
@@ -34,8 +35,9 @@ def _wind(text: str) -> tuple[float, ...]:
 log = logging.getLogger("flowgap-sitl")
 
 
-def _pump(stream, prefix: str, sink) -> None:
+def _pump(stream, prefix: str, sink, tail: collections.deque) -> None:
     for line in iter(stream.readline, ""):
+        tail.append(line.rstrip())
         if sink is not None:
             sink.write(f"{prefix} {line}")
             sink.flush()
@@ -43,9 +45,19 @@ def _pump(stream, prefix: str, sink) -> None:
 
 
 def _start(cmd: list[str], prefix: str, sink) -> subprocess.Popen:
+    """The process, its output streamed to ``sink`` (None: not shown) and its last lines kept in ``proc.tail``
+    (read after ``proc.pump`` has finished) for an error that has to say why it died."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1)
-    threading.Thread(target=_pump, args=(proc.stdout, prefix, sink), daemon=True).start()
+    proc.tail = collections.deque(maxlen=5)
+    proc.pump = threading.Thread(target=_pump, args=(proc.stdout, prefix, sink, proc.tail), daemon=True)
+    proc.pump.start()
     return proc
+
+
+def _last_words(proc: subprocess.Popen) -> str:
+    """The last non-empty line a stopped process wrote ('' when none)."""
+    proc.pump.join(timeout=2.0)
+    return next((line.strip() for line in reversed(proc.tail) if line.strip()), "")
 
 
 def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
@@ -95,6 +107,11 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
     run_dir.mkdir(parents=True, exist_ok=True)
     api, truth = 14540 + instance, 14560 + instance
     vehicle_result = run_dir / "vehicle_result.json"
+    summary_path = run_dir / "companion" / "summary.json"
+    # a run directory flown before holds that flight's results: read after a process that died early, they
+    # were taken for this flight's (measured: a companion that failed on import "flew" a stale success)
+    for stale in (vehicle_result, summary_path, run_dir / "verdict.json"):
+        stale.unlink(missing_ok=True)
     vehicle_cmd = [sys.executable, "-m", "sitl_vehicle", "--scene", scene, "--instance", str(instance),
                    "--start=" + ",".join(f"{v:g}" for v in start), f"--start-yaw={yaw_deg:g}", "--speed", f"{speed:g}",
                    "--seed", str(seed),
@@ -156,11 +173,10 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
             relay.stop()
     wall = time.monotonic() - t0
     vehicle_verdict = json.loads(vehicle_result.read_text()) if vehicle_result.exists() else {}
-    summary_path = run_dir / "companion" / "summary.json"
     companion_summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
     verdict = {
         "scene": scene,
-        "success": bool(vehicle_verdict.get("success", False)) and not interrupted,
+        "success": bool(vehicle_verdict.get("success", False)) and bool(companion_summary) and not interrupted,
         "collision": vehicle_verdict.get("collision"),
         "crossed_wall": vehicle_verdict.get("crossed_wall"),
         "min_clearance_m": vehicle_verdict.get("min_clearance_m"),
@@ -202,6 +218,12 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
                                "; a longer --timeout, or --lockstep, lets a slow machine finish it"))
     elif vehicle_ended and lockstep and (vehicle_verdict.get("sim_time_s") or 0.0) >= timeout_s - 0.01:
         verdict["error"] = f"the flight's {timeout_s:g} simulated seconds (--timeout) ran out before the mission ended"
+    elif not vehicle_verdict and vehicle_ended:
+        verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
+    elif not companion_summary:    # (then the vehicle was stopped: the companion's end is the cause)
+        words = _last_words(companion)
+        verdict["error"] = (f"the companion exited (code {companion.returncode}) without a summary"
+                            + (f": {words}" if words else "") + "; flowgap-sitl without --quiet shows its whole log")
     elif not vehicle_verdict:
         verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
     (run_dir / "verdict.json").write_text(json.dumps(verdict, indent=2) + "\n")

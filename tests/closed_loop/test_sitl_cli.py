@@ -61,3 +61,25 @@ def test_a_lockstep_flight_is_limited_in_simulated_time_and_says_so(tmp_path):
         pool.release(instance)
     assert verdict["success"] is False and verdict["sim_time_s"] == pytest.approx(3.0, abs=0.01)
     assert verdict["error"] == "the flight's 3 simulated seconds (--timeout) ran out before the mission ended"
+
+
+def test_a_companion_that_dies_at_once_is_a_failure_whatever_an_earlier_flight_left_in_its_run_dir(tmp_path):
+    """A run directory flown before holds that flight's verdicts; a companion that exits before it flies (here, on
+    a flow it cannot build) must not inherit them: the flight fails and the error quotes the companion's reason."""
+    from tools.launch import launch
+
+    run_dir = tmp_path / "flight"
+    (run_dir / "companion").mkdir(parents=True)
+    (run_dir / "vehicle_result.json").write_text(json.dumps({"success": True, "collision": False}))
+    (run_dir / "companion" / "summary.json").write_text(json.dumps({"state": "done", "servo_steps": 9}))
+    pool = InstancePool()
+    instance = pool.acquire()
+    try:
+        verdict = launch("window1_brick", run_dir, instance=instance, images=False, log_sink=None, lockstep=True,
+                         timeout_s=5.0, flow="nosuchflow")
+    finally:
+        pool.release(instance)
+    assert verdict["success"] is False and verdict["companion_state"] is None and verdict["servo_steps"] is None
+    assert verdict["error"].startswith("the companion exited (code 2) without a summary: ")
+    assert "nosuchflow" in verdict["error"] and "\n" not in verdict["error"]
+    assert json.loads((run_dir / "verdict.json").read_text()) == verdict

@@ -246,6 +246,29 @@ def test_the_clear_radius_steered_by_holds_for_two_estimates_in_a_row():
     assert agreed > first + 0.2
 
 
+def test_a_place_jump_two_sightings_confirm_starts_the_openings_places_afresh():
+    """A blob on the wall placed first, then the opening 50 px from it (within τ_c in the image, 0.7 m away on a wall
+    2.2 m ahead): once two sightings confirm the jump, the vehicle steers by the opening's place alone, not by the
+    median of both, which lies on the wall between them (hard world seed 80), and its sightings count from one."""
+    blob, opening = rect(90, 130, 110, 150), rect(110, 80, 170, 140)
+    tracker = OpeningTracker()
+    for _ in range(2):
+        tracker.observe([cand(blob)], (0.0, 0.0), None, F, W, H)
+    first = tracker.observe([cand(blob)], (0.0, 0.0), 2.2, F, W, H)
+    assert first.sightings == 1
+    jumped = tracker.observe([cand(opening)], (0.0, 0.0), 2.2, F, W, H)
+    assert jumped.offset_m == pytest.approx(first.offset_m)          # one sighting of the jump: held
+    confirmed = tracker.observe([cand(opening)], (0.0, 0.0), 2.2, F, W, H)
+    scale = (2.2 + tracker.servo.wall_thickness_m) / F
+    own = ((opening.clear_centre[0] - W / 2) * 2.2 / F, (opening.clear_centre[1] - H / 2) * 2.2 / F)
+    assert confirmed.detection is opening and confirmed.sightings == 1
+    assert confirmed.offset_m == pytest.approx(own, abs=0.01)
+    assert confirmed.clear_radius_m == 0.0          # the blob's size is not the opening's: one estimate so far
+    steady = tracker.observe([cand(opening)], (0.0, 0.0), 2.2, F, W, H)
+    assert steady.sightings == 2
+    assert steady.clear_radius_m == pytest.approx((opening.clear_radius_px + 2.0) * scale, rel=0.01)
+
+
 def test_only_sightings_with_the_wall_near_count_as_close_ones():
     """A push on the tracked place, unseen in its last frame, needs a sighting from near the wall (measured, hard
     world seed 60: a blob on the wall, tracked from 2-4 m and not seen nearer, was pushed on and hit)."""
