@@ -275,8 +275,7 @@ class OpeningTracker:
         elif pick is None and self.pixels.last_accepted:
             pick = widest
             self.world.reset()
-            self.radii, self.close_radii, self.places, self.radius_trail = [], [], [], []
-            self.close_places = 0
+            self._forget_history()
             note = (f"lost the tracked opening; following the one at ({used[0]:.0f}, {used[1]:.0f}) px, "
                     f"seen in {self.pixels.reacquire_after} frames in a row")
         if wall_distance_m is None or used is None:
@@ -296,8 +295,7 @@ class OpeningTracker:
             # one), and the median of both kinds of place lies on neither (measured, hard world seed 80,
             # hard_1468430193: a blob on the wall placed first, then the opening 1.2 m from it; the vehicle
             # centred on the wall halfway between, blobs there confirmed that place, the push met the opening's edge)
-            self.radii, self.close_radii, self.places, self.radius_trail = [], [], [], []
-            self.close_places = 0
+            self._forget_history()
         self._remember([cp for cp in placed if chosen is None or cp[0] is not chosen[0]], radius_m)
         estimated = chosen is not None and self.world.last_accepted
         if estimated:
@@ -350,6 +348,12 @@ class OpeningTracker:
                                        focal_px) if chosen[0].detection.mask.any() else 0.0
         return Sight(chosen[0].detection if chosen is not None else None, used, offset, steady, here,
                      len(self.places), self.close_places, len(self.close_radii), note, refusal)
+
+    def _forget_history(self) -> None:
+        """Drop what was kept of the tracked opening (its places, size estimates and sighting counts): what comes
+        next is another opening, or a better placed one."""
+        self.radii, self.close_radii, self.places, self.radius_trail = [], [], [], []
+        self.close_places = 0
 
     def _remember(self, placed: list[tuple[Candidate, Point]], radius_m) -> None:
         """Keep the places and clear radii (``radius_m`` of a candidate) of openings other than the tracked one (each

@@ -218,14 +218,12 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
                                "; a longer --timeout, or --lockstep, lets a slow machine finish it"))
     elif vehicle_ended and lockstep and (vehicle_verdict.get("sim_time_s") or 0.0) >= timeout_s - 0.01:
         verdict["error"] = f"the flight's {timeout_s:g} simulated seconds (--timeout) ran out before the mission ended"
-    elif not vehicle_verdict and vehicle_ended:
+    elif not vehicle_verdict and (vehicle_ended or companion_summary):
         verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
-    elif not companion_summary:    # (then the vehicle was stopped: the companion's end is the cause)
+    elif not companion_summary:    # (the vehicle, if it wrote nothing, was stopped: the companion's end is the cause)
         words = _last_words(companion)
         verdict["error"] = (f"the companion exited (code {companion.returncode}) without a summary"
                             + (f": {words}" if words else "") + "; flowgap-sitl without --quiet shows its whole log")
-    elif not vehicle_verdict:
-        verdict["error"] = "the vehicle wrote no verdict (it did not exit cleanly)"
     (run_dir / "verdict.json").write_text(json.dumps(verdict, indent=2) + "\n")
     return verdict
 
