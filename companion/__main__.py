@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                "clock": clock.name, "latency_s": args.latency, **result.as_dict()}
     runlog.summary(summary)
     push = f", pushed {result.push_length_m:.2f} m" if result.push_length_m else ""
-    board = runlog.storyboard(mission.storyboard.render(
+    board = runlog.storyboard(mission.record.storyboard.render(
         [f"companion: {result.state.value.upper()}{push} after {result.servo_steps} servo steps"
          + (f" ({result.reason})" if result.reason else "")]))
     log.info("storyboard: %s", board)

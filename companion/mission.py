@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from companion.camera import CameraError, FrameSource
-from companion.flow.colour import flow_to_colour
+from companion.flightrecord import FlightRecord
 from companion.link.base import AutopilotLink, LinkError, LinkLost
 from companion.look import across_heading, along_heading, next_look_step, see_frame
 from companion.motion import off_heading, tilted_pixel
@@ -36,7 +36,6 @@ from companion.servo import (
     heading_to_ned,
     servo_step,
 )
-from companion.storyboard import Storyboard, StoryRow, step_text
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
 from companion.wall import WallTrack
 
@@ -131,7 +130,7 @@ class Mission:
         self.camera = camera
         self.flow = flow
         self.detector = detector
-        self.runlog = runlog
+        self.record = FlightRecord(runlog, recording)   # what it saw and decided, written as it flies
         self.servo = servo or ServoConfig()
         self.config = config or MissionConfig()
         self.tracker = tracker or ConfirmingCentroidFilter()
@@ -147,8 +146,6 @@ class Mission:
         self.openings = openings or OpeningConfig()
         self.derotate = derotate_flow
         self.result = MissionResult(State.CONNECT)
-        self.storyboard = Storyboard()   # what it saw and decided, step by step (companion.storyboard)
-        self.recording = recording      # a Rerun recording of the flight (companion.recording), or None
         self.clock = link.clock     # every wait and timeout on the link's clock (wall, or lockstep)
         self._t0 = time.monotonic()
         self._t0_clock = self.clock.now()
@@ -171,7 +168,7 @@ class Mission:
             start = self.link.telemetry.position
             self.yaw = self.result.heading_rad = self.link.telemetry.attitude_euler[2]
             self.link.start_offboard(start, self.yaw)
-            self._recorded_setpoint(start)
+            self.record.setpoint(start)
             self._enter(State.SERVO)
             waypoint, bias, wall_distance, turn = self._servo_searching(start)
             self._enter(State.TRAVERSE)
@@ -214,7 +211,7 @@ class Mission:
                     raise
                 log.warning("takeoff attempt %d of %d: %s; the vehicle disarmed on the ground: arming again",
                             attempt, attempts, exc)
-                self._event(f"takeoff refused, the vehicle disarmed on the ground: arming again ({exc})", "WARN")
+                self.record.event(f"takeoff refused, the vehicle disarmed on the ground: arming again ({exc})", "WARN")
                 attempt += 1
 
     # --------------------------------------------------------------------------------- servo
@@ -246,7 +243,7 @@ class Mission:
             note = f"refused ({first}); looking again from {where}" + (
                 "" if prior is None else f", {prior - forward:.2f} m before the nearest the wall can be there")
             log.info("%s", note)
-            self._event(note, "WARN")
+            self.record.event(note, "WARN")
             # back first (away from the wall, the way it came, behind the start if need be), then across
             self._move_to(self._from_heading(min(forward, self._forward(self.link.telemetry.position)),
                                              self._across(self.link.telemetry.position)[0], start[2]))
@@ -289,11 +286,7 @@ class Mission:
         # pose is the simulator's truth, used only to render and to log).
         prev_position, prev_attitude = self._estimates_at(prev.time_s)
         base = self._frame_base
-        self._log_frame(base, prev, prev_position, prev_attitude)
-        self.runlog.save_images(base, rgb=prev.rgb)
-        if self.recording is not None:
-            self.recording.frame(base, prev.time_s, prev.rgb, None, None, position_true=prev.position,
-                                 attitude_true=prev.attitude, text=f"step {base}: the first frame")
+        self.record.first_frame(base, prev, prev_position, prev_attitude)
         waypoint = start
         step = servo_step(None, 0.0, 0, width, height, cfg)
         wall_distance = None
@@ -325,7 +318,7 @@ class Mission:
             still = moved < self.config.min_baseline_m
             seen = perceive(prev.rgb, frame.rgb, prev_attitude, attitude, self.camera.K, self.flow, self.detector,
                             self.derotate, moved, self.config.min_baseline_m)
-            self._log_frame(n, frame, position, attitude)
+            self.record.frame_poses(n, frame, position, attitude)
             view = see_frame(seen, prev.rgb, prev_position, position, prev_attitude, moved, still, self.camera.K,
                              self.yaw, openings, wall)
             sight, found, ahead = view.sight, view.found, view.ahead
@@ -335,10 +328,10 @@ class Mission:
                         f"patches of the wall (inverse depth {', '.join(f'{r:.2f}' for r in view.wall_patches)} of "
                         "the wall's there)")
                 log.info("%s", note)
-                self._event(note)
+                self.record.event(note)
             if sight.note:
                 log.info("%s", sight.note)
-                self._event(sight.note)
+                self.record.event(sight.note)
             if sight.refusal:
                 raise Refusal(sight.refusal, openings.world.used, openings.alternative())
             ever_seen |= bool(found)
@@ -353,19 +346,9 @@ class Mission:
             next_step = next_look_step(view, k, width, height, cfg, wall_prior, openings.last_accepted, lag)
             self.clock.sleep_until(t_frame + self.config.perception_latency_s)
             self.result.servo_steps = self._steps_before + k + 1
-            flow_bgr = flow_to_colour(seen.flow, bgr=True)
-            self.runlog.save_images(n, rgb=frame.rgb, flow_bgr=flow_bgr, mask=detection.mask)
-            state = ("push" if next_step.push else "aligned" if next_step.aligned else
-                     "close" if next_step.close else "servo") + (f"; {sight.note}" if sight.note else "")
             shown = None if used is None else tilted_pixel(used, self.camera.K, prev_attitude[0], prev_attitude[1],
                                                              off_heading(prev_attitude[2], self.yaw))
-            row = StoryRow(n, frame.rgb, flow_bgr[:, :, ::-1], detection.mask, detection.centroid, shown,
-                           step_text(n, next_step.error, next_step.delta_heading, wall_distance, state))
-            self.storyboard.add(row)
-            if self.recording is not None:
-                self.recording.frame(row.step, frame.time_s, row.frame, row.flow_rgb, row.mask, row.raw, row.used,
-                                     frame.position, frame.attitude, next_step.error, wall_distance, row.text)
-            self.runlog.decision({
+            self.record.step(n, frame, seen.flow, detection, shown, next_step, wall_distance, sight.note, {
                 "step": n, "t_wall_s": time.monotonic() - self._t0, "t_clock_s": self.clock.now() - self._t0_clock,
                 "frame_time_s": frame.time_s,
                 "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
@@ -418,15 +401,7 @@ class Mission:
 
     def _send(self, waypoint) -> None:
         self.link.set_position_target(waypoint, self.yaw)
-        self._recorded_setpoint(waypoint)
-
-    def _recorded_setpoint(self, waypoint) -> None:
-        if self.recording is not None:
-            self.recording.setpoint(waypoint)
-
-    def _event(self, text: str, level: str = "INFO") -> None:
-        if self.recording is not None:
-            self.recording.event(text, level)
+        self.record.setpoint(waypoint)
 
     def _estimates_at(self, time_s: float):
         """(position, attitude) estimates at a frame's time stamp.  Over a slow link they arrive after the frame:
@@ -457,12 +432,6 @@ class Mission:
                                       self.config.settle_timeout_s, "a level attitude"):
             log.debug("still tilted after %.1f s; taking the frame anyway", self.config.settle_timeout_s)
 
-    def _log_frame(self, step: int, frame, position_est, attitude_est) -> None:
-        """What replay needs to re-render and re-perceive this frame (flowgap-tlog replay)."""
-        self.runlog.frame({"step": step, "time_s": frame.time_s, "position_true": frame.position,
-                           "attitude_true": frame.attitude, "position_est": position_est,
-                           "attitude_est": attitude_est})
-
     def _forward(self, position) -> float:
         return along_heading(position, self.yaw)
 
@@ -491,12 +460,12 @@ class Mission:
         self.result.state = state
         self.result.states.append((round(self.clock.now() - self._t0_clock, 3), state.value))
         log.info("state: %s", state.value.upper())
-        self._event(f"state: {state.value.upper()}")
+        self.record.event(f"state: {state.value.upper()}")
 
     def _refuse(self, reason: str) -> None:
         """Decline the opening: hold where the vehicle is, and say why (a refused flight touches nothing)."""
         log.warning("refused in %s: %s", self.result.state.value.upper(), reason)
-        self._event(f"refused: {reason}", "WARN")
+        self.record.event(f"refused: {reason}", "WARN")
         self.result.reason = reason
         self._enter(State.REFUSED)
         try:
@@ -506,7 +475,7 @@ class Mission:
 
     def _fail(self, reason: str, safe: bool) -> None:
         log.error("mission failed in %s: %s", self.result.state.value.upper(), reason)
-        self._event(f"failed: {reason}", "ERROR")
+        self.record.event(f"failed: {reason}", "ERROR")
         failed_in = self.result.state
         self.result.reason = f"{failed_in.value}: {reason}"
         self._enter(State.FAILED)

@@ -47,7 +47,7 @@ def _fly_once(vehicle_for_link, run_dir):
         link.close()
         clock.close()          # the vehicle's last simulated second, to settle before its verdict
         camera.close()
-        mission.runlog.close()
+        mission.record.runlog.close()
     server.stop()
     return result, server.verdict()
 

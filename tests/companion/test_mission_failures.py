@@ -113,7 +113,7 @@ def _fly(tmp_path, link: ScriptedLink) -> Mission:
     mission = Mission(link, StillCamera(), never, never, RunLog(tmp_path, images=False),
                       config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3))
     mission.run()
-    mission.runlog.close()
+    mission.record.runlog.close()
     return mission
 
 
@@ -169,7 +169,7 @@ def test_no_opening_seen_in_eight_frames_is_a_refusal_that_holds(tmp_path):
                       RunLog(tmp_path, images=False),
                       config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3, search_shift_m=0.0))
     result = mission.run()
-    mission.runlog.close()
+    mission.record.runlog.close()
     assert result.state is State.REFUSED
     assert result.reason == "no opening found in 8 frames: nothing seen to fly through"
     assert link.calls[-1] == "hold" and link.calls.count("setpoint") >= 8
@@ -188,7 +188,7 @@ def test_refused_it_looks_again_from_either_side_of_the_start_before_holding(tmp
                       config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3,
                                            estimate_wait_s=0.01))   # scripted telemetry has no history to wait for
     result = mission.run()
-    mission.runlog.close()
+    mission.record.runlog.close()
     nothing = "no opening found in 8 frames: nothing seen to fly through"
     assert result.state is State.REFUSED and link.calls[-1] == "hold"
     assert result.reason == (f"{nothing}; looked again from 1.5 m right of the start: {nothing}; "
@@ -273,7 +273,7 @@ def _fly_stuck(folder, detector, **config):
                       config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3, estimate_wait_s=0.01,
                                            step_timeout_s=0.01, search_shift_m=0.0, **config))
     result = mission.run()
-    mission.runlog.close()
+    mission.record.runlog.close()
     return result, link
 
 
@@ -537,7 +537,7 @@ def test_an_opening_whose_depth_is_the_walls_is_set_aside_and_never_pushed_throu
     mission.yaw = 0.0
     with pytest.raises(Refusal, match="no opening found"):
         mission._servo((0.0, 0.0, -1.5))
-    mission.runlog.close()
+    mission.record.runlog.close()
     decisions = [json.loads(line) for line in open(tmp_path / "decisions.jsonl")]
     patches = [d["wall_patches"] for d in decisions if d["wall_patches"]]
     assert len(patches) >= len(decisions) - 1 and all(r == pytest.approx(1.0, abs=0.05) for p in patches for r in p)
@@ -625,7 +625,7 @@ def test_a_push_square_to_a_turned_wall_logs_the_length_it_flies_besides_its_dep
         caplog.clear()
         with caplog.at_level(logging.INFO, logger="companion.mission"):
             mission._traverse((0.0, 0.0, -1.5), (0.0, 0.0), 1.2, None, turn)
-        mission.runlog.close()
+        mission.record.runlog.close()
         start = (0.0, 0.0, -1.5)
         flown = sum(math.dist(a, b) for a, b in zip([start, *link.setpoints[:-1]], link.setpoints, strict=True))
         return next(r.getMessage() for r in caplog.records if r.getMessage().startswith("traversal:")), \
