@@ -72,6 +72,10 @@ class FlightJob:
 def fly(job: FlightJob, settings: FlightSettings, scene: str, run_dir: Path, instances: InstancePool) -> dict:
     """Fly one flight on this node on an instance of ``instances``; launch's verdict plus ``instance``, ``host``
     and the wall-clock span the instance was held (``flight_started``, ``flight_ended``, Unix seconds)."""
+    if run_dir.exists():
+        # an earlier flight's files (a sweep flown again into the same --out, or a row deleted and --resumed)
+        # would otherwise stay beside this flight's, its step images and logs mistaken for this one's
+        shutil.rmtree(run_dir)
     instance = instances.acquire()
     started = time.time()
     try:

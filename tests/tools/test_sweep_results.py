@@ -173,3 +173,23 @@ def test_a_resumed_sweep_judges_its_reused_rows_by_todays_passable_rule(tmp_path
     flights = json.loads((out / "flights.json").read_text())
     assert [(r["passable"], r["success"]) for r in flights["rows"]] == [(True, True)]
     assert (flights["summary"]["passable"], flights["summary"]["success"]) == (1, 1)
+
+
+def test_a_flight_flown_again_starts_from_an_empty_run_directory(tmp_path, monkeypatch):
+    import tools.sweep_executors as executors
+    from tools.eval_flights import InstancePool
+
+    run_dir = tmp_path / "out" / "scene-0"
+    (run_dir / "companion" / "frames").mkdir(parents=True)
+    (run_dir / "companion" / "frames" / "007.png").write_bytes(b"an earlier flight's frame")
+    seen = []
+
+    def launch(scene, run_dir, *args, **kwargs):
+        seen.append(sorted(p.name for p in Path(run_dir).rglob("*")))
+        return {"success": True}
+
+    monkeypatch.setattr(executors, "launch", launch)
+    job = executors.FlightJob("scene", "scene", 0, {"start": (0.0, 0.0, 0.0), "seed": 1, "altitude": 1.5,
+                                                    "wind": None, "camera_delay_s": 0.0})
+    verdict = executors.fly(job, executors.FlightSettings(), "scene", run_dir, InstancePool())
+    assert verdict["success"] and seen == [[]]
