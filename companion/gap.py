@@ -1,23 +1,21 @@
 """Gap detection: from dense flow to a gap mask and centroid.
 
-Two detectors share one result type, :class:`GapDetection`:
+Two detectors share one result type, :class:`GapDetection`: the paper's colour-edge pipeline
+(:mod:`companion.gap_paper`) and ours, here.
 
-- :func:`detect_gap` is the paper's pipeline (docs/design.md step 3, paper II.C): colour the flow with the
-  Middlebury wheel → BGR image → grey → Gaussian blur 5×5 → Canny(10, 40) → morphological closing 3×3 ×3 →
-  external contours → keep 0.001·HW ≤ area ≤ 0.9·HW → largest → centroid from moments → filled mask.
-- :func:`detect_gap_parallax` is ours: it works on the flow *vectors*, not on colour grey levels that
-  depend on flow direction.  For a camera that translates (no rotation), the flow at a pixel is
-  ``F = ρ·g(x, y; t)`` with ρ = |T|/Z the inverse depth (in units of the step length) and g known from the
-  intrinsics and the translation direction t (estimated from the flow by least squares when not given).
-  ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion) and away from the
-  image border, inpainted elsewhere, and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
-  (floor, wall); the far class of the sharpest significant depth step is what lies beyond the opening.  The
-  largest far component inside the size bounds and enclosed by a nearer surface is the mask, with the band of
-  it that the wall hides in the second frame filled back (the flow there follows the wall).  With
-  ``past_the_end`` (off as flown), a sharpest step with no hole beyond it has its far parts at the image's border
-  set aside, as what lies past the wall's end, and the rest is split again.
+:func:`detect_gap_parallax` works on the flow *vectors*, not on colour grey levels that
+depend on flow direction.  For a camera that translates (no rotation), the flow at a pixel is
+``F = ρ·g(x, y; t)`` with ρ = |T|/Z the inverse depth (in units of the step length) and g known from the
+intrinsics and the translation direction t (estimated from the flow by least squares when not given).
+ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion) and away from the
+image border, inpainted elsewhere, and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
+(floor, wall); the far class of the sharpest significant depth step is what lies beyond the opening.  The
+largest far component inside the size bounds and enclosed by a nearer surface is the mask, with the band of
+it that the wall hides in the second frame filled back (the flow there follows the wall).  With
+``past_the_end`` (off as flown), a sharpest step with no hole beyond it has its far parts at the image's border
+set aside, as what lies past the wall's end, and the rest is split again.
 
-Both take an H×W×2 float flow (u right, v down, pixels) and return a frozen :class:`GapDetection`.
+Both detectors take an H×W×2 float flow (u right, v down, pixels) and return a frozen :class:`GapDetection`.
 """
 
 from __future__ import annotations
@@ -28,8 +26,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-
-from companion.flow.colour import flow_to_colour
 
 log = logging.getLogger(__name__)
 
@@ -101,53 +97,6 @@ def _from_contour(shape: tuple[int, int], contour: np.ndarray, detector: str) ->
     return GapDetection(mask.astype(bool), (float(centroid[0]), float(centroid[1])),
                         float(cv2.contourArea(contour)), polygon, None, detector,
                         centre if centre is not None else (float(centroid[0]), float(centroid[1])), radius)
-
-
-# ----------------------------------------------------------------------------------------------------------
-# The paper's detector
-# ----------------------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class GapDetectorConfig:
-    """Constants of the paper's detector (II.C), with its defaults."""
-
-    blur_ksize: int = 5               # Gaussian kernel, 5×5; sigma derived by OpenCV from the size (sigma=0)
-    blur_sigma: float = 0.0
-    canny_low: float = 10.0           # τ_low, 8-bit units
-    canny_high: float = 40.0          # τ_high
-    close_ksize: int = 3              # structuring element K, 3×3 rectangle
-    close_iterations: int = 3
-    area_min_frac: float = 0.001      # α_min
-    area_max_frac: float = 0.9        # α_max
-
-
-def detect_gap_in_colour(flow_bgr: np.ndarray, config: GapDetectorConfig = GapDetectorConfig(),
-                         *, detector: str = "paper") -> GapDetection:
-    """Run steps 3a–3e on a flow colour image given in **BGR** channel order (H×W×3 uint8)."""
-    if flow_bgr.ndim != 3 or flow_bgr.shape[2] != 3 or flow_bgr.dtype != np.uint8:
-        raise ValueError(f"expected an H×W×3 uint8 BGR image, got {flow_bgr.shape} {flow_bgr.dtype}")
-    h, w = flow_bgr.shape[:2]
-    grey = cv2.cvtColor(flow_bgr, cv2.COLOR_BGR2GRAY)
-    grey = cv2.GaussianBlur(grey, (config.blur_ksize, config.blur_ksize), config.blur_sigma)
-    edges = cv2.Canny(grey, config.canny_low, config.canny_high)
-    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (config.close_ksize, config.close_ksize))
-    closed = cv2.morphologyEx(edges, cv2.MORPH_CLOSE, kernel, iterations=config.close_iterations)
-    contours, _ = cv2.findContours(closed, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    if not contours:
-        return _no_gap((h, w), "no contours in the edge map", detector)
-    a_min, a_max = config.area_min_frac * h * w, config.area_max_frac * h * w
-    valid = [(cv2.contourArea(c), c) for c in contours]
-    valid = [(a, c) for a, c in valid if a_min <= a <= a_max]
-    if not valid:
-        return _no_gap((h, w), f"no contour with {a_min:.0f} <= area <= {a_max:.0f} px² "
-                               f"({len(contours)} contours)", detector)
-    _, best = max(valid, key=lambda ac: ac[0])
-    return _from_contour((h, w), best, detector)
-
-
-def detect_gap(flow: np.ndarray, config: GapDetectorConfig = GapDetectorConfig()) -> GapDetection:
-    """The paper's gap detector on an H×W×2 flow field (colours it, normalised by its largest magnitude)."""
-    return detect_gap_in_colour(flow_to_colour(flow, bgr=True), config, detector="paper")
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -511,11 +460,16 @@ def _holes(far: np.ndarray, config: ParallaxGapConfig, a_min: float, a_max: floa
     return [c for _, c in scored]
 
 
-DETECTORS = {"paper": detect_gap, "parallax": detect_gap_parallax}
+DETECTORS = ("paper", "parallax")
 
 
 def get_detector(name: str):
-    """The detector function registered as ``name`` ("paper" or "parallax")."""
-    if name not in DETECTORS:
-        raise KeyError(f"unknown gap detector {name!r}; choose from {sorted(DETECTORS)}")
-    return DETECTORS[name]
+    """The detector function registered as ``name``: "paper" (:func:`companion.gap_paper.detect_gap`) or
+    "parallax" (:func:`detect_gap_parallax`)."""
+    if name == "paper":
+        from companion.gap_paper import detect_gap  # it answers with this module's GapDetection
+
+        return detect_gap
+    if name == "parallax":
+        return detect_gap_parallax
+    raise KeyError(f"unknown gap detector {name!r}; choose from {sorted(DETECTORS)}")

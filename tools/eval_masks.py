@@ -119,7 +119,8 @@ def camera_translation(camera, pose1, pose2) -> tuple[float, float, float]:
 
 
 def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2):
-    from companion.gap import CameraMotion, ParallaxGapConfig, detect_gap, detect_gap_parallax
+    from companion.gap import CameraMotion, ParallaxGapConfig, detect_gap_parallax
+    from companion.gap_paper import detect_gap
 
     if name == "paper":
         return detect_gap(flow)

@@ -5,14 +5,12 @@ import pytest
 
 from companion.gap import (
     CameraMotion,
-    GapDetectorConfig,
     ParallaxGapConfig,
     clear_circle,
-    detect_gap,
-    detect_gap_in_colour,
     detect_gap_parallax,
     estimate_translation,
 )
+from companion.gap_paper import GapDetectorConfig, detect_gap, detect_gap_in_colour
 from tests.companion.synthetic import FOCAL_320x240, iou, translation_flow
 
 H, W = 240, 320

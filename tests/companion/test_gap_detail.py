@@ -20,19 +20,17 @@ from companion.flow.colour import flow_to_colour
 from companion.gap import (
     CameraMotion,
     GapDetection,
-    GapDetectorConfig,
     ParallaxGapConfig,
     _blend_level,
     _from_contour,
     _otsu_split,
     clear_circle,
-    detect_gap,
-    detect_gap_in_colour,
     estimate_translation,
     far_region,
     get_detector,
     inverse_depth_from_flow,
 )
+from companion.gap_paper import GapDetectorConfig, detect_gap, detect_gap_in_colour
 from tests.companion.synthetic import FOCAL_320x240, iou, translation_flow
 
 # Small frames keep these fast.  Pure lateral motion to the right, t = (1, 0, 0): g = (-f, 0) at every pixel,

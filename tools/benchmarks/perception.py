@@ -101,7 +101,8 @@ def run() -> dict[str, dict]:
     import torch
 
     from companion.flow import make_flow_backend
-    from companion.gap import detect_gap, detect_gap_parallax
+    from companion.gap import detect_gap_parallax
+    from companion.gap_paper import detect_gap
 
     torch.set_num_threads(2)
     cv2.setNumThreads(2)
