@@ -41,7 +41,8 @@ EQUIVALENT = ROOT / "docs" / "mutation-equivalent.json"
 # target -> (files to mutate, test files); smallest and fastest first
 TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "companion.servo": (["companion/servo.py"],
-                        ["tests/closed_loop/test_servo.py", "tests/companion/test_opening.py"]),
+                        ["tests/closed_loop/test_servo.py", "tests/companion/test_servo_edges.py",
+                         "tests/companion/test_opening.py"]),
     "sitl_vehicle.control": ([f"sitl_vehicle/control/{m}.py" for m in ("position", "attitude", "rate", "mixer")],
                              ["tests/sitl_vehicle/test_control.py", "tests/sitl_vehicle/test_control_laws.py"]),
     "companion.motion": (["companion/motion.py"], ["tests/closed_loop/test_tracking_and_motion.py"]),
