@@ -175,6 +175,10 @@ def test_desaturate_shifts_once_then_by_half_of_what_is_left():
     # first gain −0.2 + 0.1 = −0.1: (1.1, −0.2, 0.4, 0.4); then −0.1 + 0.2 = 0.1, half of it: +0.05
     _desaturate(u, ones)
     assert u == pytest.approx([1.15, -0.15, 0.45, 0.45])
+    # by default (airmode) a shift that raises u is taken too
+    y = [-0.1, 0.5, 0.5, 0.5]
+    _desaturate(y, ones)
+    assert y == pytest.approx([0.0, 0.6, 0.6, 0.6])
     # reduce-only: a positive shift is refused, a negative one taken
     v = [-0.1, 0.5, 0.5, 0.5]
     _desaturate(v, ones, reduce_only=True)
