@@ -360,7 +360,22 @@ def test_sample_pose_pair_clips_height_and_range_and_defaults_without_an_opening
 
 # --- corridor_clearance / passable_openings ----------------------------------------------------------------
 
-RES = 0.006  # clearances are exact to PASSABILITY_RESOLUTION_M (0.005 m; fillPoly includes the outline pixels)
+RES = 0.0015  # clearances are exact to PASSABILITY_RESOLUTION_M (0.001 m), a vertex rounded to the grid aside
+
+
+def test_a_slot_a_centimetre_narrower_than_the_body_and_its_margins_is_not_passable():
+    """The hard world's threshold: a 0.38 m body with 0.05 m each side needs 0.48 m.  Slots 0.47 and 0.479 m wide
+    do not pass (the outline's own pixels, counted in, once made the first 0.48 m); 0.48 m does, and 0.481 m."""
+    def slot(width):
+        return SceneSpec(openings=(OpeningSpec("rect", center=(0.013, -1.517), size=(width, 1.2)),))
+    for width in (0.47, 0.479):
+        assert corridor_clearance(slot(width), 0, 0.0) == pytest.approx(width / 2, abs=RES)
+        assert passable_openings(slot(width), 0.19, 0.05) == [False]
+    for width in (0.48, 0.481):
+        assert passable_openings(slot(width), 0.19, 0.05) == [True]
+    # an opening a millimetre across (a pixel of the grid, its outline) leaves no clearance at all
+    assert corridor_clearance(SceneSpec(openings=(OpeningSpec("rect", center=(0.0, -1.5), size=(0.001, 0.001)),)),
+                              0, 0.0) == 0.0
 
 
 def test_corridor_clearance_of_rectangles_circles_and_a_slant():
