@@ -6,6 +6,14 @@ import cv2
 import numpy as np
 
 FOCAL_320x240 = 120.0 / np.tan(np.radians(37.5))   # flowgap default camera: 320×240, vertical FOV 75°
+SMALL = (60, 80)    # (H, W) of the small frames the detector's and the servo's detail tests use: they keep them fast
+
+
+def box(x0: int, y0: int, x1: int, y1: int, shape: tuple[int, int] = SMALL) -> np.ndarray:
+    """Bool mask of pixels x0..x1-1, y0..y1-1."""
+    m = np.zeros(shape, bool)
+    m[y0:y1, x0:x1] = True
+    return m
 
 
 def translation_flow(h: int, w: int, t: tuple[float, float, float], polygon, *, rho_near: float = 0.5,

@@ -31,11 +31,11 @@ from companion.gap import (
     inverse_depth_from_flow,
 )
 from companion.gap_paper import GapDetectorConfig, detect_gap, detect_gap_in_colour
-from tests.companion.synthetic import FOCAL_320x240, iou, translation_flow
+from tests.companion.synthetic import SMALL, FOCAL_320x240, box, iou, translation_flow
 
 # Small frames keep these fast.  Pure lateral motion to the right, t = (1, 0, 0): g = (-f, 0) at every pixel,
 # so the flow is u = -ρ·f, v = 0 and the inverse depth read back is exactly ρ everywhere (no focus of expansion).
-H, W, F = 60, 80, 50.0
+(H, W), F = SMALL, 50.0
 LATERAL = CameraMotion(translation=(1.0, 0.0, 0.0), focal_px=F)
 # what the parallax detector does to the far class, switched off so that the mask is exactly the drawn region
 RAW = dict(border_px=0, median_ksize=1, open_ksize=1, close_ksize=1)
@@ -55,13 +55,6 @@ def lateral_flow(far: np.ndarray, rho_near: float = 0.5, rho_far: float = 0.25) 
     flow = np.zeros(far.shape + (2,), np.float32)
     flow[..., 0] = -rho * F
     return flow
-
-
-def box(x0: int, y0: int, x1: int, y1: int, shape=(H, W)) -> np.ndarray:
-    """Bool mask of pixels x0..x1-1, y0..y1-1."""
-    m = np.zeros(shape, bool)
-    m[y0:y1, x0:x1] = True
-    return m
 
 
 def contour_of(*xy) -> np.ndarray:

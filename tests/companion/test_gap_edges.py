@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from companion.gap import ParallaxGapConfig, _fill_occluded, _holes, _holes_past_the_end, _within, textured_pixels
+from tests.companion.synthetic import SMALL, box
 
-H, W = 60, 80
+H, W = SMALL
 F = 100.0                       # the lateral step's focal length: g = (-F, 0) everywhere
 G = (np.full((H, W), -F), np.zeros((H, W)))
 EVERYWHERE = np.ones((H, W), bool)
@@ -21,12 +22,6 @@ EVERYWHERE = np.ones((H, W), bool)
 def grey_rgb(values: np.ndarray) -> np.ndarray:
     """An RGB image of equal channels (its grey is exactly ``values``)."""
     return np.repeat(values.astype(np.uint8)[..., None], 3, axis=2)
-
-
-def box(x0: int, y0: int, x1: int, y1: int, shape=(H, W)) -> np.ndarray:
-    m = np.zeros(shape, bool)
-    m[y0:y1, x0:x1] = True
-    return m
 
 
 def outline(mask: np.ndarray) -> np.ndarray:

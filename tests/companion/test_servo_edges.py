@@ -15,18 +15,13 @@ import pytest
 from companion import servo
 from companion.gap import ParallaxGapConfig
 from companion.servo import ServoConfig, alignment_tolerance, metric_step, wall_readings_agree, wall_slope
+from tests.companion.synthetic import SMALL, box
 
-H, W = 60, 80
+H, W = SMALL
 FOCAL = 100.0
 # the focal length inverse_depth_from_flow takes when given none: the flowgap camera's vertical field of view
 DEFAULT_F = (H / 2.0) / math.tan(math.radians(ParallaxGapConfig().vfov_deg) / 2.0)
 LATERAL = (1.0, 0.0, 0.0)
-
-
-def box(x0: int, y0: int, x1: int, y1: int, shape=(H, W)) -> np.ndarray:
-    m = np.zeros(shape, bool)
-    m[y0:y1, x0:x1] = True
-    return m
 
 
 def lateral_flow(rho: np.ndarray) -> np.ndarray:
