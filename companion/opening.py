@@ -95,6 +95,9 @@ class Sight:
     judged_estimates: int = 0       # its size estimates taken in front of it, near (what judges it: see observe)
     note: str | None = None         # a choice or a switch, said once
     refusal: str | None = None      # why the vehicle will not fly through (then it must not)
+    estimate_m: float | None = None  # this frame's own clear-radius estimate of it (None: this frame gave none)
+    estimate_px: float | None = None  # ... from this clear radius of its mask, in the wall's plane (pixels)
+    judged: bool = False            # ... and it counts among those that judge the opening (see observe)
 
 
 def candidates_in(detection, K: np.ndarray, attitude, heading: float | None = None) -> list[Candidate]:
@@ -298,11 +301,14 @@ class OpeningTracker:
             self._forget_history()
         self._remember([cp for cp in placed if chosen is None or cp[0] is not chosen[0]], radius_m)
         estimated = chosen is not None and self.world.last_accepted
+        estimate = estimate_px = None
+        judged_here = False
         if estimated:
-            estimate = radius_m(chosen[0])
+            estimate, estimate_px = radius_m(chosen[0]), radius_px(chosen[0].detection)
             self.radii.append(estimate)
-            if (math.dist(chosen[1], across_m) <= self.config.judge_offset_m
-                    and wall_distance_m <= self.config.decide_within_m and moved_m >= self.config.judge_step_m):
+            judged_here = (math.dist(chosen[1], across_m) <= self.config.judge_offset_m
+                           and wall_distance_m <= self.config.decide_within_m and moved_m >= self.config.judge_step_m)
+            if judged_here:
                 self.close_radii.append(estimate)
             self.places.append(chosen[1])
             self.close_places += wall_distance_m <= self.config.decide_within_m
@@ -347,7 +353,8 @@ class OpeningTracker:
             here = self.clear_radius_m(edge_distance_px(mask, (axis[0] * stretch, axis[1])), depth(axis),
                                        focal_px) if chosen[0].detection.mask.any() else 0.0
         return Sight(chosen[0].detection if chosen is not None else None, used, offset, steady, here,
-                     len(self.places), self.close_places, len(self.close_radii), note, refusal)
+                     len(self.places), self.close_places, len(self.close_radii), note, refusal, estimate, estimate_px,
+                     judged_here)
 
     def _forget_history(self) -> None:
         """Drop what was kept of the tracked opening (its places, size estimates and sighting counts): what comes

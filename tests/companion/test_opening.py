@@ -304,10 +304,16 @@ def test_only_size_estimates_from_in_front_of_it_near_the_wall_judge_it():
     ahead = rect(100, 60, 220, 180)
     front = [tracker.observe([cand(ahead)], (-offset, 0.0), 1.4, F, W, H, moved_m=0.2) for _ in range(2)]
     assert [s.judged_estimates for s in front] == [1, 2]
+    # each frame's own estimate is reported, with whether it judges: the mask's clear radius scaled at the wall
+    assert [s.judged for s in side] == [False] * 3 and [s.judged for s in front] == [True, True]
+    assert front[-1].estimate_px == pytest.approx(ahead.clear_radius_px)
+    assert front[-1].estimate_m == pytest.approx(tracker.clear_radius_m(ahead.clear_radius_px, 1.4, F))
     # nor a step too short for parallax, nor from further than decide_within_m
-    assert tracker.observe([cand(ahead)], (-offset, 0.0), 1.4, F, W, H, moved_m=0.02).judged_estimates == 2
-    assert tracker.observe([cand(ahead)], (-offset, 0.0), cfg.decide_within_m + 0.1, F, W, H,
-                           moved_m=0.2).judged_estimates == 2
+    short = tracker.observe([cand(ahead)], (-offset, 0.0), 1.4, F, W, H, moved_m=0.02)
+    assert short.judged_estimates == 2 and not short.judged and short.estimate_m == front[-1].estimate_m
+    far = tracker.observe([cand(ahead)], (-offset, 0.0), cfg.decide_within_m + 0.1, F, W, H, moved_m=0.2)
+    assert far.judged_estimates == 2 and not far.judged and far.estimate_m > front[-1].estimate_m
+    assert tracker.observe([], (-offset, 0.0), 1.4, F, W, H, moved_m=0.2).estimate_m is None
 
 
 # --- an opening in a turned wall: the corridor a body flying along the heading has ----------------------------
