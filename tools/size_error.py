@@ -155,6 +155,7 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     from companion.opening import OpeningTracker, in_wall, turned_wall_stretch
     from companion.servo import TURN_NEGLIGIBLE_RAD, ServoConfig
     from scenes import load_scene, render_splats
+    from scenes.groundtruth import corridor_clearance
     from scenes.library import random_scene
     from scenes.spec import SpecError
     from tools.eval_masks import gt_mask
@@ -171,8 +172,6 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
         spec.validate()
     except SpecError:       # scaled past the wall's edge: another draw
         return [], None
-    from scenes.groundtruth import corridor_clearance
-
     truth_m = corridor_clearance(spec, 0, 0.0)
     centre = clear_centre_yz(spec.openings[0])
     spec, cloud = load_scene(spec)
