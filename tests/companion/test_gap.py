@@ -206,3 +206,18 @@ def test_textured_pixels_are_those_near_an_edge_of_the_image():
     # a faint gradient (under the threshold) is not texture
     ramp = np.tile(np.linspace(0, 60, W, dtype=np.float32), (H, 1)).astype(np.uint8)[..., None].repeat(3, axis=2)
     assert not textured_pixels(ramp, cfg).any()
+
+
+def test_flying_at_an_opening_near_its_edge_leaves_no_notch_where_the_focus_of_expansion_is():
+    """The pixels too near the focus of expansion to read ρ are filled from around them; flying at an opening puts
+    the focus in it, and where the filled disc reaches the edge the wall's ρ is smeared into the opening.  The
+    focus 8 px inside the left edge of a 53 x 51 px opening: the default's disc leaves the clear circle whole;
+    one twice as wide (0.08, the default until 2026-12-05) cuts 2 px off it."""
+    cx, cy = (W - 1) / 2, (H - 1) / 2
+    polygon = [(cx - 8, cy - 25), (cx + 45, cy - 25), (cx + 45, cy + 25), (cx - 8, cy + 25)]
+    flow, truth = translation_flow(H, W, (0.0, 0.0, 1.0), polygon, occlusion=True)
+    motion = CameraMotion(focal_px=FOCAL_320x240)
+    whole = clear_circle(truth)[1]
+    assert detect_gap_parallax(flow, ParallaxGapConfig(), motion).clear_radius_px == pytest.approx(whole, abs=0.5)
+    wide = ParallaxGapConfig(min_g_frac=0.08)
+    assert detect_gap_parallax(flow, wide, motion).clear_radius_px <= whole - 1.5

@@ -266,7 +266,8 @@ def test_a_place_jump_two_sightings_confirm_starts_the_openings_places_afresh():
     assert confirmed.clear_radius_m == 0.0          # the blob's size is not the opening's: one estimate so far
     steady = tracker.observe([cand(opening)], (0.0, 0.0), 2.2, F, W, H)
     assert steady.sightings == 2
-    assert steady.clear_radius_m == pytest.approx((opening.clear_radius_px + 2.0) * scale, rel=0.01)
+    inset = tracker.config.mask_inset_px
+    assert steady.clear_radius_m == pytest.approx((opening.clear_radius_px + inset) * scale, rel=0.01)
 
 
 def test_only_sightings_with_the_wall_near_count_as_close_ones():
