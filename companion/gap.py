@@ -108,12 +108,7 @@ class ParallaxGapConfig:
     """Constants of :func:`detect_gap_parallax`."""
 
     vfov_deg: float = 75.0            # used when no focal length is given (flowgap default camera)
-    min_g_frac: float = 0.04          # |g| below this fraction of its max is "too close to the FoE": filled
-                                      # (inpainted from around).  Flying at an opening puts the FoE in it, and
-                                      # where the filled disc reaches the edge the wall's ρ is smeared in: a notch.
-                                      # On 750 approach pairs of near-threshold openings (tools.size_error, seed
-                                      # 9000, RAFT) the mask's clear radius was 5.1 px short of the truth's at the
-                                      # 10th percentile with 0.08 (a 16 px disc), 3.7 px with 0.04
+    min_g_frac: float = 0.08          # |g| below this fraction of its max is "too close to the FoE": filled
     median_ksize: int = 5             # smoothing of the 8-bit log-inverse-depth image
     robust_percentiles: tuple[float, float] = (0.5, 99.5)   # log inverse depth → 8 bit
     min_contrast: float = 1.25        # a split is real when the classes' median inverse depths differ this much

@@ -63,7 +63,7 @@ class OpeningConfig:
     min_gate_px: float = 20.0       # ... and their half separation gates no tighter than this
     lost_after: int = 4             # frames in a row with openings in view but none matched to the tracked one:
                                     # then one placed where the tracked one is on the wall is taken for it
-    mask_inset_px: float = 1.5      # the parallax mask's clear circle lies this far inside that of what is seen
+    mask_inset_px: float = 2.0      # the parallax mask's clear circle lies this far inside that of what is seen
                                     # through the opening (see clear_radius_m)
     alternative_sightings: int = 3  # another opening is worth a look of the search once this many frames placed it
     max_depth_ratio: float = 0.85   # an opening's inverse depth is at most this fraction of the wall plane's
@@ -174,11 +174,7 @@ class OpeningTracker:
         true distance, upper quartile over truth), 1/cos(turn) and 1.5 px gave 1.008 at the median, 0.940-1.127
         from the 10th to the 90th percentile, and of the 93 openings 0.40-0.56 m clear, 8 of 47 passable ones judged
         too small and 11 of 46 impassable ones judged to fit; the stretch and 2 px give 1.016, 0.950-1.091, 7 and 9
-        (1.75 px: 1.006, 8 and 8; flown on hard seeds 67 and 68, 1.75 px lost two passable flights more than 2 px).
-        With the detector's smaller dead disc at the focus of expansion (``ParallaxGapConfig.min_g_frac`` 0.04, whose
-        masks have fewer notches), 1.5 px, the inset that kept the median judgement of 145 rendered approaches where it
-        was; on others, ``python -m tools.size_error --scenes 150 --seed 9000``, the judgement over the truth came out
-        0.969 at the median (0.971 before), 0.902-1.028 from the 10th to the 90th percentile (0.870-1.043 before)."""
+        (1.75 px: 1.006, 8 and 8; flown on hard seeds 67 and 68, 1.75 px lost two passable flights more than 2 px)."""
         return (radius_px + self.config.mask_inset_px) * (wall_distance_m + self.servo.wall_thickness_m) / focal_px
 
     def observe(self, candidates: list[Candidate], across_m: Point, wall_distance_m: float | None,

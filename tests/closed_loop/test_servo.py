@@ -635,10 +635,9 @@ def test_a_walls_depth_ratio_is_read_exactly_along_the_known_move_on_a_turned_an
     assert got[0] is None
     assert got[1] == pytest.approx(0.5, abs=2e-4) and got[3] == pytest.approx(1.0, abs=2e-4)
     assert got[2] == pytest.approx(1.0, abs=2e-4)
-    # the flow's own focus of expansion, or the empty pixels in the fit: the wall's patch 0.5-3 % off (20 times
-    # the tolerance above)
-    assert abs(depth_against_wall(flow, [patch], F, None, ~empty)[0] - 1.0) > 0.004
-    assert abs(depth_against_wall(flow, [patch], F, move, None)[0] - 1.0) > 0.004
+    # the flow's own focus of expansion, or the empty pixels in the fit: the wall's patch 0.9-3 % off
+    assert abs(depth_against_wall(flow, [patch], F, None, ~empty)[0] - 1.0) > 0.005
+    assert abs(depth_against_wall(flow, [patch], F, move, None)[0] - 1.0) > 0.005
     assert depth_against_wall(flow, [], F, move, ~empty) == []
 
 
