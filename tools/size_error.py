@@ -62,7 +62,9 @@ def scaled_opening(spec, index: int, clearance_m: float):
 
 
 def clear_centre_yz(opening, resolution_m: float = 0.002) -> tuple[float, float]:
-    """(y, z) of the centre of the largest circle inside the opening's outline (what the servo aims at)."""
+    """(y, z) of a centre of the largest circle inside the opening's outline: the first of its plateau in the grid's
+    row order, so for an elongated opening an end of the plateau, not its middle as the servo's
+    (:func:`companion.gap.clear_circle`); the clear radius seen from there is the same."""
     import cv2
 
     poly = np.asarray(opening.polygon(), float)
@@ -166,9 +168,9 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     spec = random_scene(rng, world="hard")
     spec = scaled_opening(spec, int(rng.integers(len(spec.openings))), float(rng.uniform(need - args.band,
                                                                                            need + args.band)))
+    if spec is None:
+        return [], None
     try:
-        if spec is None:
-            return [], None
         spec.validate()
     except SpecError:       # scaled past the wall's edge: another draw
         return [], None

@@ -33,7 +33,7 @@ def test_an_opening_is_scaled_alone_to_the_clear_radius_asked_for(opening):
 
 
 def test_the_clear_centre_is_the_middle_of_the_largest_circle_inside():
-    # an L-free case with a known answer: a 0.8 x 0.4 rectangle's plateau is a segment; a 0.4 x 0.4 square's a point
+    # a square's plateau is a single point: its middle
     y, z = size_error.clear_centre_yz(OpeningSpec("rect", center=(0.3, -1.2), size=(0.4, 0.4)))
     assert (y, z) == pytest.approx((0.3, -1.2), abs=0.003)
     # a triangle's incentre: legs 0.6 along y and z from (0, -1): incircle radius (a + b - c) / 2
