@@ -319,6 +319,17 @@ def _fail(message: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from tools.launch import flights_stopped_by_signals
+
+    try:
+        with flights_stopped_by_signals():     # a killed sweep stops its flights' processes, as Ctrl-C does
+            return _main(argv)
+    except KeyboardInterrupt:      # Ctrl-C or SIGTERM before or after the flights (during them: see launch)
+        print("flowgap-eval-flights: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s %(message)s")
     from scenes.build import resolve_spec

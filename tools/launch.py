@@ -2,7 +2,7 @@
 
 Starts ``flowgap-vehicle`` and ``flowgap-companion`` as two OS processes with matching addresses (PX4's
 instance numbering: API 14540+N, truth 14560+N), streams their logs with a prefix, stops both when the
-companion's mission ends (or on Ctrl-C), and reports the verdict the *vehicle* wrote from its own ground
+companion's mission ends (or on Ctrl-C or SIGTERM), and reports the verdict the *vehicle* wrote from its own ground
 truth: no companion code marks its own homework.  With ``--link-loss``/``--link-delay``/... a seeded
 fault relay (:mod:`tools.link_relay`) sits on the API link between them, like a lossy telemetry radio.
 """
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import contextlib
 import json
 import logging
 import signal
@@ -18,6 +19,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from companion.flow.registry import DEFAULT_FLOW
@@ -44,10 +46,58 @@ def _pump(stream, prefix: str, sink, tail: collections.deque) -> None:
     stream.close()
 
 
+# every flight process this one has started and not yet stopped, for a signal to stop (flights_stopped_by_signals)
+_running: set[subprocess.Popen] = set()
+_running_lock = threading.Lock()
+_terminating = threading.Event()
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGINT arrived: taken as Ctrl-C is, so that each flight's ``finally`` stops its two processes."""
+
+
+@contextlib.contextmanager
+def flights_stopped_by_signals() -> Iterator[None]:
+    """While inside, SIGTERM (``kill``, ``pkill``, a CI or batch scheduler's time limit) and a SIGINT sent to this
+    process alone stop its flights as Ctrl-C in a terminal does.  Python's default for SIGTERM ends the process at
+    once: no ``finally`` runs, and every flight's vehicle and companion run on with no parent (measured: a stopped
+    sweep's ``sitl_vehicle`` processes, idle minutes later).  Ctrl-C reaches the children itself (the terminal
+    signals the whole process group); these reach only this process, so they are passed on here, and no flight
+    starts after them.  For a CLI's main thread (elsewhere it does nothing); a SIGINT ignored by the shell that
+    started the process stays ignored."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_signal(signum, frame) -> None:
+        with _running_lock:
+            _terminating.set()
+            procs = list(_running)
+        for proc in procs:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        raise Terminated()
+
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    for sig, handler in before.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(sig, on_signal)
+    try:
+        yield
+    finally:
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
+        _terminating.clear()
+
+
 def _start(cmd: list[str], prefix: str, sink) -> subprocess.Popen:
     """The process, its output streamed to ``sink`` (None: not shown) and its last lines kept in ``proc.tail``
     (read after ``proc.pump`` has finished) for an error that has to say why it died."""
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1)
+    with _running_lock:
+        if _terminating.is_set():
+            raise Terminated()
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1)
+        _running.add(proc)
     proc.tail = collections.deque(maxlen=5)
     proc.pump = threading.Thread(target=_pump, args=(proc.stdout, prefix, sink, proc.tail), daemon=True)
     proc.pump.start()
@@ -68,6 +118,8 @@ def _stop(proc: subprocess.Popen, timeout: float = 10.0) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+    with _running_lock:
+        _running.discard(proc)
 
 
 DEFAULT_ALTITUDE_M = 1.5      # the suite's openings are centred near 1.5 m up; a capture says its own
@@ -147,10 +199,11 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
         if lockstep:
             vehicle_cmd.append(f"--truth-remote=127.0.0.1:{relay.vehicle_truth_address[1]}")
     t0 = time.monotonic()
-    companion = _start(companion_cmd, "[companion]", log_sink)
-    vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink)
+    companion = vehicle = None
     interrupted = vehicle_ended = timed_out = False
     try:
+        companion = _start(companion_cmd, "[companion]", log_sink)
+        vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink)
         while companion.poll() is None:
             if vehicle.poll() is not None:
                 vehicle_ended = True
@@ -167,8 +220,10 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
         interrupted = True
         log.warning("interrupted: stopping both processes")
     finally:
-        _stop(companion)
-        _stop(vehicle)
+        interrupted = interrupted or _terminating.is_set()   # (a flight in a sweep's thread: the signal hit main)
+        for proc in (companion, vehicle):
+            if proc is not None:
+                _stop(proc)
         if relay is not None:
             relay.stop()
     wall = time.monotonic() - t0
@@ -211,7 +266,7 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
     if rerun and not rerun_connect and (run_dir / "flight.rrd").exists():
         verdict["rerun"] = str(run_dir / "flight.rrd")
     if interrupted:
-        verdict["error"] = "interrupted (Ctrl-C): both processes were stopped"
+        verdict["error"] = "interrupted (Ctrl-C or SIGTERM): both processes were stopped"
     elif timed_out:
         verdict["error"] = (f"timed out after {wall_limit_s:.0f} wall seconds: both processes were stopped"
                             + (" (a lockstep flight this slow is hung)" if lockstep else
@@ -240,6 +295,15 @@ def describe(v: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    try:
+        with flights_stopped_by_signals():
+            return _main(argv)
+    except KeyboardInterrupt:      # Ctrl-C or SIGTERM before or after the flights (during them: see launch)
+        print("flowgap-sitl: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     p = argparse.ArgumentParser(prog="flowgap-sitl", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter,
                                 epilog="example: flowgap-sitl --scene window2_stone --start 0,0.3,0 "

@@ -1,24 +1,48 @@
 """``flowgap-sitl`` as a user runs it (the `make demo` path): a process that writes its verdict, exits with the
-flight's status, and stops both of its processes on Ctrl-C."""
+flight's status, and stops both of its processes on Ctrl-C or SIGTERM (so does a sweep)."""
 
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
 from tools.eval_flights import InstancePool, _ports_free
 
 
+def _stat(pid: int | str) -> list[str] | None:
+    """A process's /proc stat fields after its name (state, parent, ...), None once it is gone."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+
+
+def _alive(pids) -> set[int]:
+    """Those of ``pids`` still running (a zombie is not)."""
+    return {int(pid) for pid in pids if (stat := _stat(pid)) is not None and stat[0] != "Z"}
+
+
+def _children(pid: int) -> set[int]:
+    """The live processes whose parent is ``pid``."""
+    return _alive(p.name for p in Path("/proc").glob("[0-9]*") if (stat := _stat(p.name)) and int(stat[1]) == pid)
+
+
 @pytest.mark.slow
-def test_ctrl_c_mid_flight_stops_both_processes_and_leaves_a_verdict(tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_or_sigterm_mid_flight_stops_both_processes_and_leaves_a_verdict(tmp_path, sig):
+    """SIGTERM (pkill, a CI time limit) reaches the launcher alone, not its two processes as a terminal's Ctrl-C
+    does: both are stopped all the same (Python's default would leave them running, parentless)."""
     pool = InstancePool()
     instance = pool.acquire()
     run_dir, result = tmp_path / "flight", tmp_path / "verdict-copy.json"
+    flight: set[int] = set()
     try:
         sitl = subprocess.Popen([sys.executable, "-m", "tools.launch", "--scene", "window1_brick", "--lockstep",
                                  "--quiet", "--run-dir", str(run_dir), "--instance", str(instance),
@@ -29,8 +53,11 @@ def test_ctrl_c_mid_flight_stops_both_processes_and_leaves_a_verdict(tmp_path):
         while not (frames.exists() and len(frames.read_text().splitlines()) >= 3):   # servoing
             assert sitl.poll() is None and time.monotonic() < deadline, "the flight never got to its third frame"
             time.sleep(0.1)
-        sitl.send_signal(signal.SIGINT)
+        flight = _children(sitl.pid)
+        assert len(flight) == 2, "the vehicle and the companion are the launcher's children"
+        sitl.send_signal(sig)
         out, _ = sitl.communicate(timeout=60)
+        assert not _alive(flight), "a process of the flight outlived the launcher"
         assert sitl.returncode == 1
         verdict = json.loads((run_dir / "verdict.json").read_text())
         assert verdict["success"] is False and verdict["error"].startswith("interrupted")
@@ -40,9 +67,38 @@ def test_ctrl_c_mid_flight_stops_both_processes_and_leaves_a_verdict(tmp_path):
             assert time.monotonic() < deadline, "a process of the flight still holds its ports"
             time.sleep(0.2)
     finally:
-        if sitl.poll() is None:
-            sitl.kill()
+        for pid in _alive(flight | {sitl.pid}):
+            os.kill(pid, signal.SIGKILL)
         pool.release(instance)
+
+
+@pytest.mark.slow
+def test_a_sweep_stopped_by_sigterm_stops_its_flights_and_starts_no_more(tmp_path):
+    """``pkill -f flowgap-eval-flights`` once left every flight's vehicle running idle; now the sweep stops the
+    flights in progress, starts none of those queued, saves none of the stopped ones, and exits 130."""
+    out = tmp_path / "sweep"
+    sweep = subprocess.Popen([sys.executable, "-m", "tools.eval_flights", "window1_brick", "--starts", "3",
+                              "--jobs", "1", "--flow", "dis:fine", "-o", str(out)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    flight: set[int] = set()
+    try:
+        frames = out / "window1_brick-0" / "companion" / "frames.jsonl"
+        deadline = time.monotonic() + 60
+        while not (frames.exists() and len(frames.read_text().splitlines()) >= 3):
+            assert sweep.poll() is None and time.monotonic() < deadline, "the first flight never got to its third frame"
+            time.sleep(0.1)
+        flight = _children(sweep.pid)
+        assert len(flight) == 2
+        sweep.send_signal(signal.SIGTERM)
+        _, err = sweep.communicate(timeout=60)
+        assert sweep.returncode == 130, err
+        assert not _alive(flight), "a process of the stopped flight outlived the sweep"
+        assert not (out / "window1_brick-1").exists(), "a queued flight started after the SIGTERM"
+        assert not list((out / "results").glob("*.json")), "a stopped flight was saved as flown"
+        assert "Traceback" not in err and "interrupted" in err
+    finally:
+        for pid in _alive(flight | {sweep.pid}):
+            os.kill(pid, signal.SIGKILL)
 
 
 @pytest.mark.slow
