@@ -62,18 +62,19 @@ def scaled_opening(spec, index: int, clearance_m: float):
 
 
 def clear_centre_yz(opening, resolution_m: float = 0.002) -> tuple[float, float]:
-    """(y, z) of a centre of the largest circle inside the opening's outline: the first of its plateau in the grid's
-    row order, so for an elongated opening an end of the plateau, not its middle as the servo's
-    (:func:`companion.gap.clear_circle`); the clear radius seen from there is the same."""
+    """(y, z) of the centre of the largest circle inside the opening's outline, the middle of its plateau for an
+    elongated opening, where the servo aims (:func:`companion.gap.clear_circle`; before 2026-12-05, an end of the
+    plateau: the clear radius seen from there is the same, the view is not the servo's)."""
     import cv2
+
+    from companion.gap import clear_circle
 
     poly = np.asarray(opening.polygon(), float)
     lo = poly.min(0) - 2 * resolution_m
     size = np.ceil((poly.max(0) - lo + 2 * resolution_m) / resolution_m).astype(int) + 1
     grid = cv2.fillPoly(np.zeros((size[1], size[0]), np.uint8), [np.round((poly - lo) / resolution_m)
                                                                   .astype(np.int32)], 1)
-    dist = cv2.distanceTransform(grid, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    row, col = np.unravel_index(int(dist.argmax()), dist.shape)
+    (col, row), _ = clear_circle(grid.astype(bool))
     return float(lo[0] + col * resolution_m), float(lo[1] + row * resolution_m)
 
 

@@ -40,6 +40,9 @@ def test_the_clear_centre_is_the_middle_of_the_largest_circle_inside():
     tri = OpeningSpec("polygon", vertices=((0.0, -1.0), (0.6, -1.0), (0.0, -1.6)))
     r = (0.6 + 0.6 - math.hypot(0.6, 0.6)) / 2
     assert size_error.clear_centre_yz(tri) == pytest.approx((r, -1.0 - r), abs=0.004)
+    # an elongated one's plateau is a segment: its middle, where the servo aims, not an end
+    slot = OpeningSpec("rect", center=(0.3, -1.2), size=(1.2, 0.4))
+    assert size_error.clear_centre_yz(slot) == pytest.approx((0.3, -1.2), abs=0.003)
 
 
 @pytest.mark.parametrize("yaw_deg", [0.0, 15.0, -20.0])
