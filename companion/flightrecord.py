@@ -48,8 +48,8 @@ class FlightRecord:
         the tilted frame shows it (None: none), the step sent next, and the decision's log line."""
         flow_bgr = flow_to_colour(flow, bgr=True)
         self.runlog.save_images(n, rgb=frame.rgb, flow_bgr=flow_bgr, mask=detection.mask)
-        state = ("push" if next_step.push else "aligned" if next_step.aligned else
-                 "close" if next_step.close else "servo") + (f"; {note}" if note else "")
+        state = ("refused" if decision.get("refusal") else "push" if next_step.push else "aligned"
+                 if next_step.aligned else "close" if next_step.close else "servo") + (f"; {note}" if note else "")
         row = StoryRow(n, frame.rgb, flow_bgr[:, :, ::-1], detection.mask, detection.centroid, shown_px,
                        step_text(n, next_step.error, next_step.delta_heading, wall_distance, state))
         self.storyboard.add(row)

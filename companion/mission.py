@@ -33,6 +33,7 @@ from companion.runlog import RunLog
 from companion.search import look_places, search_wall_bound, search_wall_ceiling
 from companion.servo import (
     ServoConfig,
+    ServoStep,
     heading_to_ned,
     servo_step,
 )
@@ -332,7 +333,26 @@ class Mission:
             if sight.note:
                 log.info("%s", sight.note)
                 self.record.event(sight.note)
+            shown = None if used is None else tilted_pixel(used, self.camera.K, prev_attitude[0], prev_attitude[1],
+                                                             off_heading(prev_attitude[2], self.yaw))
+            observed = {   # the frame and what was made of it; then the step it decided, or the refusal
+                "step": n, "frame_time_s": frame.time_s,
+                "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
+                "centroid_raw": detection.centroid, "openings": len(found), "centroid_used": used,
+                "clear_radius_m": sight.clear_radius_m, "clearance_here_m": sight.clearance_here_m,
+                "judged_estimates": sight.judged_estimates, "estimate_m": sight.estimate_m,
+                "estimate_px": sight.estimate_px, "judged": sight.judged, "note": sight.note,
+                "attitude_est": attitude, "accepted": self.tracker.last_accepted,
+                "no_gap_reason": detection.reason, "area_frac": view.area_frac, "wall_distance_m": view.measured,
+                "far_distance_m": view.far, "wall_patches": [round(r, 3) for r in view.wall_patches],
+                "wall_turn_rad": view.wall_yaw,
+                "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": seen.flow_ms,
+                           "detect_ms": seen.detect_ms}}
+
+            # a refusal's own frame is logged too, holding: the estimate that decided it is in the decision log
+            hold = ServoStep((0.0, 0.0, 0.0), None, False, False)
             if sight.refusal:
+                self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed, sight.refusal)
                 raise Refusal(sight.refusal, openings.world.used, openings.alternative())
             ever_seen |= bool(found)
             if ahead is not None:
@@ -340,32 +360,14 @@ class Mission:
                 # end, rough readings of what lies behind it) would start the next look too near the wall
                 self._wall_seen = (view.here + ahead, view.across, view.wall_yaw)
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
-                raise Refusal(f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on", None,
-                              openings.alternative())
+                why = f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on"
+                self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed, why)
+                raise Refusal(why, None, openings.alternative())
             lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))
             next_step = next_look_step(view, k, width, height, cfg, wall_prior, openings.last_accepted, lag)
             self.clock.sleep_until(t_frame + self.config.perception_latency_s)
             self.result.servo_steps = self._steps_before + k + 1
-            shown = None if used is None else tilted_pixel(used, self.camera.K, prev_attitude[0], prev_attitude[1],
-                                                             off_heading(prev_attitude[2], self.yaw))
-            self.record.step(n, frame, seen.flow, detection, shown, next_step, wall_distance, sight.note, {
-                "step": n, "t_wall_s": time.monotonic() - self._t0, "t_clock_s": self.clock.now() - self._t0_clock,
-                "frame_time_s": frame.time_s,
-                "position_true": frame.position, "position_est": position, "waypoint": waypoint, "arrived": arrived,
-                "centroid_raw": detection.centroid, "openings": len(found), "centroid_used": used,
-                "clear_radius_m": sight.clear_radius_m, "clearance_here_m": sight.clearance_here_m,
-                "judged_estimates": sight.judged_estimates, "estimate_m": sight.estimate_m,
-                "estimate_px": sight.estimate_px, "judged": sight.judged,
-                "note": sight.note,
-                "attitude_est": attitude, "accepted": self.tracker.last_accepted,
-                "no_gap_reason": detection.reason, "area_frac": view.area_frac,
-                "error": next_step.error, "next_delta_heading": next_step.delta_heading, "close": next_step.close,
-                "push": next_step.push, "wall_distance_m": view.measured, "far_distance_m": view.far,
-                "wall_patches": [round(r, 3) for r in view.wall_patches], "wall_turn_rad": view.wall_yaw,
-                "offset_m": next_step.offset_m, "tolerance_m": next_step.tolerance_m, "aligned": next_step.aligned,
-                "timing": {"move_s": move_s, "capture_ms": frame.capture_ms, "flow_ms": seen.flow_ms,
-                           "detect_ms": seen.detect_ms},
-            })
+            self._record_step(frame, seen.flow, detection, shown, next_step, wall_distance, observed)
             log.info("step %d: centroid %s used %s area %.3f error %s wall %.2f m%s", n,
                      _fmt(detection.centroid), _fmt(used), view.area_frac, _fmt(next_step.error),
                      view.measured if view.measured is not None else math.nan, " → push" if next_step.push else "")
@@ -403,6 +405,19 @@ class Mission:
     def _send(self, waypoint) -> None:
         self.link.set_position_target(waypoint, self.yaw)
         self.record.setpoint(waypoint)
+
+    def _record_step(self, frame, flow, detection, shown_px, decided: ServoStep, wall_distance, observed: dict,
+                     refusal: str | None = None) -> None:
+        """A servo step's images and decision line: ``observed`` (what the frame showed and was made of) and the
+        step ``decided``, or, with ``refusal``, the hold the flight ends in and why."""
+        self.record.step(observed["step"], frame, flow, detection, shown_px, decided, wall_distance,
+                         refusal or observed["note"], {
+                             "step": observed["step"], "t_wall_s": time.monotonic() - self._t0,
+                             "t_clock_s": self.clock.now() - self._t0_clock, **observed, "refusal": refusal,
+                             "error": decided.error,
+                             "next_delta_heading": decided.delta_heading, "close": decided.close, "push": decided.push,
+                             "offset_m": decided.offset_m, "tolerance_m": decided.tolerance_m,
+                             "aligned": decided.aligned})
 
     def _estimates_at(self, time_s: float):
         """(position, attitude) estimates at a frame's time stamp.  Over a slow link they arrive after the frame:

@@ -14,6 +14,7 @@ from companion.camera import Frame
 from companion.clock import _ClockBase
 from companion.link.base import AutopilotLink, LinkError
 from companion.mission import Mission, MissionConfig, State
+from companion.opening import OpeningConfig
 from companion.runlog import RunLog
 
 
@@ -439,6 +440,29 @@ class SmallHole:
         mask = (xs - (w - 1) / 2) ** 2 + (ys - (h - 1) / 2) ** 2 <= 4.0
         centre = ((w - 1) / 2, (h - 1) / 2)
         return GapDetection(mask, centre, float(mask.sum()), None, None, "fake", centre, 2.0)
+
+
+def test_the_frame_that_refuses_an_opening_is_in_the_decision_log_with_the_estimate_that_decided_it(tmp_path):
+    """Every refusal is auditable frame by frame: the frame whose size estimate tipped the judgement is logged (it
+    was not, before 2026-12-05: the log ended one frame short of the decision), holding, with the reason."""
+    import json
+
+    from companion.mission import Refusal
+
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)
+    mission = Mission(link, StillCamera(), WallFlow(link, 3.0), SmallHole(), RunLog(tmp_path, images=False),
+                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01))
+    mission.yaw = 0.0
+    with pytest.raises(Refusal, match="is narrower than the vehicle's") as refused:
+        mission._servo((0.0, 0.0, -1.5))
+    mission.record.runlog.close()
+    decisions = [json.loads(line) for line in open(tmp_path / "decisions.jsonl")]
+    last = decisions[-1]
+    assert last["refusal"] == str(refused.value) and all(d["refusal"] is None for d in decisions[:-1])
+    assert last["judged"] and last["judged_estimates"] >= OpeningConfig().min_estimates
+    assert 2 * last["estimate_m"] < 0.30 and last["next_delta_heading"] == [0.0, 0.0, 0.0] and not last["push"]
+    assert last["step"] == decisions[-2]["step"] + 1
 
 
 def _look(tmp_path, wall_n: float, prior: float, wrong_every: int = 0) -> RecordingLink:
