@@ -71,12 +71,14 @@ def flights_stopped_by_signals() -> Iterator[None]:
 
     def on_signal(signum, frame) -> None:
         with _running_lock:
+            again = _terminating.is_set()
             _terminating.set()
             procs = list(_running)
         for proc in procs:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
-        raise Terminated()
+        if not again:     # a second signal (Ctrl-C pressed twice) must not cut short the stopping the first began
+            raise Terminated()
 
     before = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
     for sig, handler in before.items():

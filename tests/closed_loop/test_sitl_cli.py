@@ -35,10 +35,11 @@ def _children(pid: int) -> set[int]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_ctrl_c_or_sigterm_mid_flight_stops_both_processes_and_leaves_a_verdict(tmp_path, sig):
+@pytest.mark.parametrize(("sig", "times"), [(signal.SIGINT, 1), (signal.SIGTERM, 1), (signal.SIGTERM, 2)])
+def test_ctrl_c_or_sigterm_mid_flight_stops_both_processes_and_leaves_a_verdict(tmp_path, sig, times):
     """SIGTERM (pkill, a CI time limit) reaches the launcher alone, not its two processes as a terminal's Ctrl-C
-    does: both are stopped all the same (Python's default would leave them running, parentless)."""
+    does: both are stopped all the same (Python's default would leave them running, parentless); a second signal
+    while they are being stopped does not cut that short."""
     pool = InstancePool()
     instance = pool.acquire()
     run_dir, result = tmp_path / "flight", tmp_path / "verdict-copy.json"
@@ -55,7 +56,9 @@ def test_ctrl_c_or_sigterm_mid_flight_stops_both_processes_and_leaves_a_verdict(
             time.sleep(0.1)
         flight = _children(sitl.pid)
         assert len(flight) == 2, "the vehicle and the companion are the launcher's children"
-        sitl.send_signal(sig)
+        for _ in range(times):
+            sitl.send_signal(sig)
+            time.sleep(0.1)
         out, _ = sitl.communicate(timeout=60)
         assert not _alive(flight), "a process of the flight outlived the launcher"
         assert sitl.returncode == 1
