@@ -90,7 +90,14 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         print(f"flowgap-bench: unknown group(s) {unknown}; choose from {available_groups()}", file=sys.stderr)
         return 2
-    new = run_groups(groups)
+    from tools.launch import flights_stopped_by_signals
+
+    try:
+        with flights_stopped_by_signals():     # the flight benchmark's processes stop with it, as in flowgap-sitl
+            new = run_groups(groups)
+    except KeyboardInterrupt:
+        print(f"flowgap-bench: interrupted; {args.output} left as it was", file=sys.stderr)
+        return 130
     merge_results(new, args.output, rerun_prefixes(groups))
     width = max((len(k) for k in new), default=0)
     for key, entry in sorted(new.items()):

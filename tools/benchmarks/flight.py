@@ -27,6 +27,8 @@ def run() -> dict:
                 run_dir = Path(tmp) / f"demo-{i}"
                 verdict = launch("window1_brick", run_dir, speed=2.0, instance=instance, flow=DEFAULT_FLOW,
                                  images=False, log_sink=None)
+                if str(verdict.get("error", "")).startswith("interrupted"):
+                    raise KeyboardInterrupt      # stopped by Ctrl-C or SIGTERM: no timing to take from it
                 walls.append(verdict["wall_time_s"])
                 successes += bool(verdict["success"])
                 for line in (run_dir / "companion" / "decisions.jsonl").read_text().splitlines():
