@@ -11,7 +11,9 @@ this replays it for other thicknesses:
   (exact where the opening's width bounds its clear circle, an upper bound of the change otherwise);
 - the judgement is made as :class:`companion.opening.OpeningTracker` makes it: from the ``min_estimates``-th
   judged estimate of an opening on (a log's count falling back to 1 starts another), refused as soon as the upper
-  quartile of the latest ``radius_window`` falls short of the body radius and its margin.
+  quartile of the latest ``radius_window`` falls short of the body radius and its margin.  A flight counts as
+  refused by the replay if any opening it judged is (the switch to another opening in view that a refusal may
+  make instead is not replayed).
 
 What it tells: which flights flown through the replay refuses (a passable one lost; an impassable one refused, as
 it must be).  What it cannot: how a flight refused for its size would have gone had it been judged to fit; those
