@@ -78,7 +78,9 @@ def test_fly_with_the_link_and_keep_streaming_while_busy(vehicle_for_link, tmp_p
             busy += sum(i * i for i in range(2000))
         sent = [t for t in link.setpoint_times if t >= start]
         gaps = [b - a for a, b in zip(sent, sent[1:], strict=False)]
-        assert len(sent) >= 15 and max(gaps) < 0.1, f"setpoint stream stalled: max gap {max(gaps):.3f} s"
+        # starved, the 1.5 s spell would be one gap; PX4 needs 2 Hz at least.  Four 20 Hz periods leave room for
+        # a busy 2-core machine's scheduling (0.106 s was seen once beside nothing else, 2026-12-06)
+        assert len(sent) >= 15 and max(gaps) < 0.2, f"setpoint stream stalled: max gap {max(gaps):.3f} s"
         assert link.wait_position((0.6, 0.3, -1.2), 0.05, 10)
         with pytest.raises(LinkError, match="refused"):
             link.command(4242)  # unsupported: the error names the result
