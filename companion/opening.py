@@ -112,6 +112,12 @@ def candidates_in(detection, K: np.ndarray, attitude, heading: float | None = No
             for d in found]
 
 
+def upper_quartile(estimates: list[float], window: int) -> float:
+    """The clear radius (m) a tracked opening is steered and judged by: the upper quartile of its latest ``window``
+    size estimates (see the module docstring); 0 without any."""
+    return float(np.percentile(estimates[-window:], 75)) if estimates else 0.0
+
+
 def median_place(places: list[Point]) -> Point:
     """The per-axis median of places (right, down): an opening does not move, its sightings jitter."""
     return float(np.median([p[0] for p in places])), float(np.median([p[1] for p in places]))
@@ -316,7 +322,7 @@ class OpeningTracker:
         target = median_place(self.places[-self.config.radius_window:] or [self.world.used])
         # steered by every estimate until close ones, taken in front of the opening, are there to judge it by
         best = self.close_radii or self.radii
-        radius = float(np.percentile(best[-self.config.radius_window:], 75)) if best else 0.0
+        radius = upper_quartile(best, self.config.radius_window)
         if estimated:
             self.radius_trail.append(radius)
         refusal = None

@@ -29,13 +29,12 @@ Outputs (in ``-o/--out``): ``fit_replay.json`` (per run and thickness: counts an
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import math
 import sys
 from pathlib import Path
-
-import numpy as np
 
 log = logging.getLogger("flowgap.fit_replay")
 
@@ -69,52 +68,63 @@ def flights(run: Path) -> list[dict]:
     return out
 
 
-def rescaled(decision: dict, thickness_m: float, flown_thickness_m: float, focal_px: float, inset_px: float,
-             need_m: float) -> float:
-    """A logged frame's size estimate (m) scaled again for a wall ``thickness_m`` thick (see the module)."""
+def rescaled(decision: dict, judging, flown, focal_px: float) -> float:
+    """A logged frame's size estimate (m), scaled by the :class:`companion.opening.OpeningTracker` ``flown``, scaled
+    again as ``judging`` (another wall thickness) scales it (see the module)."""
     from companion.opening import TURN_NEGLIGIBLE_RAD, turned_wall_stretch
 
     estimate, pixels = decision["estimate_m"], decision["estimate_px"]
-    depth = estimate * focal_px / (pixels + inset_px) - flown_thickness_m
+    flown_t, judging_t = flown.servo.wall_thickness_m, judging.servo.wall_thickness_m
+    depth = estimate * focal_px / (pixels + flown.config.mask_inset_px) - flown_t    # clear_radius_m's inverse
     turn = decision.get("wall_turn_rad")
     if turn is not None and abs(turn) > TURN_NEGLIGIBLE_RAD:
-        pixels *= (turned_wall_stretch(need_m, depth, turn, thickness_m)
-                   / turned_wall_stretch(need_m, depth, turn, flown_thickness_m))
-    return (pixels + inset_px) * (depth + thickness_m) / focal_px
+        need = judging.servo.body_radius_m + judging.servo.clearance_margin_m      # as observe stretches
+        pixels *= turned_wall_stretch(need, depth, turn, judging_t) / turned_wall_stretch(need, depth, turn, flown_t)
+    return judging.clear_radius_m(pixels, depth, focal_px)
 
 
-def refused_for_size(decisions: list[dict], thickness_m: float, flown_thickness_m: float, focal_px: float,
-                     tracker_config, need_m: float) -> bool:
-    """Whether the judgement, replayed for a wall ``thickness_m`` thick, refuses an opening of this flight."""
+def refused_for_size(decisions: list[dict], judging, flown, focal_px: float) -> bool:
+    """Whether the tracker ``judging`` (another wall thickness than ``flown``'s), replayed on a flight's decision
+    lines, refuses an opening of it."""
+    from companion.opening import upper_quartile
+    from companion.servo import alignment_tolerance
+
+    config = judging.config
     estimates: list[float] = []
     for d in decisions:
         if not d.get("judged") or d.get("estimate_m") is None or d.get("estimate_px") is None:
             continue
         if d.get("judged_estimates", 0) <= 1:
             estimates = []               # another opening, or the tracked one's history forgotten
-        estimates.append(rescaled(d, thickness_m, flown_thickness_m, focal_px, tracker_config.mask_inset_px, need_m))
-        if (len(estimates) >= tracker_config.min_estimates
-                and float(np.percentile(estimates[-tracker_config.radius_window:], 75)) < need_m):
+        estimates.append(rescaled(d, judging, flown, focal_px))
+        if (len(estimates) >= config.min_estimates
+                and alignment_tolerance(upper_quartile(estimates, config.radius_window), judging.servo) < 0):
             return True
     return False
+
+
+def tracker_for(thickness_m: float):
+    """The companion's opening tracker, its defaults but for the wall thickness it scales sizes for."""
+    from companion.opening import OpeningTracker
+    from companion.servo import ServoConfig
+
+    return OpeningTracker(dataclasses.replace(ServoConfig(), wall_thickness_m=thickness_m))
 
 
 def replay_run(rows: list[dict], thicknesses: list[float], focal_px: float) -> dict:
     """Per thickness: passable flights through, impassable ones flown, the flights whose outcome the replay
     changes (``lost``: passable, flown through, refused by the replay; ``now_refused``: impassable, flown, refused
     by it) and those it cannot tell (``undecided``: refused for size as flown, judged to fit by the replay)."""
-    from companion.opening import OpeningConfig
-    from companion.servo import ServoConfig
+    from companion.opening import OpeningTracker
 
-    servo, tracker = ServoConfig(), OpeningConfig()
-    need = servo.body_radius_m + servo.clearance_margin_m
-    flown = servo.wall_thickness_m
-    as_flown = {r["scene"]: refused_for_size(r["decisions"], flown, flown, focal_px, tracker, need) for r in rows}
+    flown = OpeningTracker()
+    as_flown = {r["scene"]: refused_for_size(r["decisions"], flown, flown, focal_px) for r in rows}
     out = {}
     for t in thicknesses:
         lost, now_refused, undecided, through, imp_flown = [], [], [], 0, 0
+        judging = tracker_for(t)
         for r in rows:
-            refuses = refused_for_size(r["decisions"], t, flown, focal_px, tracker, need)
+            refuses = refused_for_size(r["decisions"], judging, flown, focal_px)
             if r["passable"] and r["success"]:
                 if refuses and not as_flown[r["scene"]]:
                     lost.append(r["scene"])

@@ -16,6 +16,7 @@ F = float(PinholeCamera().K[0, 0])
 FLOWN = ServoConfig().wall_thickness_m
 INSET = OpeningConfig().mask_inset_px
 NEED = ServoConfig().body_radius_m + ServoConfig().clearance_margin_m
+AS_FLOWN, THIN = fit_replay.tracker_for(FLOWN), fit_replay.tracker_for(0.10)
 
 
 def frame(radius_m: float, depth_m: float = 1.2, judged: bool = True, count: int = 2, turn: float | None = None):
@@ -28,33 +29,32 @@ def frame(radius_m: float, depth_m: float = 1.2, judged: bool = True, count: int
 def test_a_frame_rescaled_for_the_thickness_flown_is_its_own_estimate_and_thinner_is_smaller():
     for turn in (None, 0.0, math.radians(12), math.radians(-18)):
         d = frame(0.245, turn=turn)
-        assert fit_replay.rescaled(d, FLOWN, FLOWN, F, INSET, NEED) == pytest.approx(0.245)
-        assert fit_replay.rescaled(d, 0.10, FLOWN, F, INSET, NEED) < 0.245
+        assert fit_replay.rescaled(d, AS_FLOWN, AS_FLOWN, F) == pytest.approx(0.245)
+        assert fit_replay.rescaled(d, THIN, AS_FLOWN, F) < 0.245
     facing = frame(0.245)
-    assert fit_replay.rescaled(facing, 0.10, FLOWN, F, INSET, NEED) == pytest.approx(0.245 * 1.30 / 1.35)
+    assert fit_replay.rescaled(facing, THIN, AS_FLOWN, F) == pytest.approx(0.245 * 1.30 / 1.35)
     turned = frame(0.245, turn=math.radians(15))
     ratio = turned_wall_stretch(NEED, 1.2, math.radians(15), 0.10) / turned_wall_stretch(NEED, 1.2, math.radians(15),
                                                                                         FLOWN)
     pixels = turned["estimate_px"] * ratio
     assert ratio < 1.0
-    assert fit_replay.rescaled(turned, 0.10, FLOWN, F, INSET, NEED) == pytest.approx((pixels + INSET) * 1.30 / F)
+    assert fit_replay.rescaled(turned, THIN, AS_FLOWN, F) == pytest.approx((pixels + INSET) * 1.30 / F)
 
 
 def test_the_judgement_is_replayed_as_the_tracker_makes_it():
-    config = OpeningConfig()
     just_fits = [frame(0.247, count=1), frame(0.243, count=2), frame(0.242, count=3)]
-    assert not fit_replay.refused_for_size(just_fits, FLOWN, FLOWN, F, config, NEED)
-    assert fit_replay.refused_for_size(just_fits, 0.10, FLOWN, F, config, NEED)
+    assert not fit_replay.refused_for_size(just_fits, AS_FLOWN, AS_FLOWN, F)
+    assert fit_replay.refused_for_size(just_fits, THIN, AS_FLOWN, F)
     # two estimates are no judgement; frames not judged (from the side, far) do not count
-    assert not fit_replay.refused_for_size(just_fits[:2] + [frame(0.2, judged=False)], 0.10, FLOWN, F, config, NEED)
+    assert not fit_replay.refused_for_size(just_fits[:2] + [frame(0.2, judged=False)], THIN, AS_FLOWN, F)
     # a count back at 1 is another opening: the small one's two estimates do not judge the wide one
     switched = [frame(0.20, count=1), frame(0.20, count=2), frame(0.30, count=1), frame(0.30, count=2),
                 frame(0.30, count=3)]
-    assert not fit_replay.refused_for_size(switched, FLOWN, FLOWN, F, config, NEED)
+    assert not fit_replay.refused_for_size(switched, AS_FLOWN, AS_FLOWN, F)
     # the upper quartile of the latest five, from the third on
     low = [frame(0.30, count=1)] + [frame(0.23, count=k) for k in (2, 3, 4, 5)]
-    assert fit_replay.refused_for_size(low, FLOWN, FLOWN, F, config, NEED)            # 0.30 past a quartile
-    assert not fit_replay.refused_for_size(low[:4], FLOWN, FLOWN, F, config, NEED)    # 0.30 lifts the quartile
+    assert fit_replay.refused_for_size(low, AS_FLOWN, AS_FLOWN, F)            # 0.30 past a quartile
+    assert not fit_replay.refused_for_size(low[:4], AS_FLOWN, AS_FLOWN, F)    # 0.30 lifts the quartile
 
 
 def _sweep(tmp_path, flights: dict) -> None:
