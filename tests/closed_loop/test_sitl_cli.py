@@ -9,29 +9,11 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
+from support.processes import alive, children
 from tools.eval_flights import InstancePool, _ports_free
-
-
-def _stat(pid: int | str) -> list[str] | None:
-    """A process's /proc stat fields after its name (state, parent, ...), None once it is gone."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return None
-
-
-def _alive(pids) -> set[int]:
-    """Those of ``pids`` still running (a zombie is not)."""
-    return {int(pid) for pid in pids if (stat := _stat(pid)) is not None and stat[0] != "Z"}
-
-
-def _children(pid: int) -> set[int]:
-    """The live processes whose parent is ``pid``."""
-    return _alive(p.name for p in Path("/proc").glob("[0-9]*") if (stat := _stat(p.name)) and int(stat[1]) == pid)
 
 
 @pytest.mark.slow
@@ -53,13 +35,13 @@ def test_ctrl_c_mid_flight_stops_both_processes_and_leaves_a_verdict_whatever_si
         while not (frames.exists() and len(frames.read_text().splitlines()) >= 3):   # servoing
             assert sitl.poll() is None and time.monotonic() < deadline, "the flight never got to its third frame"
             time.sleep(0.1)
-        flight = _children(sitl.pid)
+        flight = children(sitl.pid)
         assert len(flight) == 2, "the vehicle and the companion are the launcher's children"
         for sig in (signal.SIGINT, signal.SIGTERM):       # sent to the launcher alone
             sitl.send_signal(sig)
             time.sleep(0.1)
         out, _ = sitl.communicate(timeout=60)
-        assert not _alive(flight), "a process of the flight outlived the launcher"
+        assert not alive(flight), "a process of the flight outlived the launcher"
         assert sitl.returncode == 1
         verdict = json.loads((run_dir / "verdict.json").read_text())
         assert verdict["success"] is False and verdict["error"].startswith("interrupted")
@@ -69,7 +51,7 @@ def test_ctrl_c_mid_flight_stops_both_processes_and_leaves_a_verdict_whatever_si
             assert time.monotonic() < deadline, "a process of the flight still holds its ports"
             time.sleep(0.2)
     finally:
-        for pid in _alive(flight | {sitl.pid}):
+        for pid in alive(flight | {sitl.pid}):
             os.kill(pid, signal.SIGKILL)
         pool.release(instance)
 
@@ -89,17 +71,17 @@ def test_a_sweep_stopped_by_sigterm_stops_its_flights_and_starts_no_more(tmp_pat
         while not (frames.exists() and len(frames.read_text().splitlines()) >= 3):
             assert sweep.poll() is None and time.monotonic() < deadline, "the first flight never got to its third frame"
             time.sleep(0.1)
-        flight = _children(sweep.pid)
+        flight = children(sweep.pid)
         assert len(flight) == 2
         sweep.send_signal(signal.SIGTERM)
         _, err = sweep.communicate(timeout=60)
         assert sweep.returncode == 130, err
-        assert not _alive(flight), "a process of the stopped flight outlived the sweep"
+        assert not alive(flight), "a process of the stopped flight outlived the sweep"
         assert not (out / "window1_brick-1").exists(), "a queued flight started after the SIGTERM"
         assert not list((out / "results").glob("*.json")), "a stopped flight was saved as flown"
         assert "Traceback" not in err and "interrupted" in err
     finally:
-        for pid in _alive(flight | {sweep.pid}):
+        for pid in alive(flight | {sweep.pid}):
             os.kill(pid, signal.SIGKILL)
 
 

@@ -110,14 +110,15 @@ def _run_in_namespace(folder: Path) -> None:
 # --------------------------------------------------------------------------------------------------------------
 
 def _session_processes(sid: int) -> dict[int, str]:
+    from support.processes import pids, proc_stat
+
     found = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
+    for pid in pids():
+        fields = proc_stat(pid)
         try:
-            text = stat.read_text()
-            fields = text[text.rindex(")") + 2:].split()
-            if int(fields[3]) == sid:          # (state, ppid, pgrp, session, ...)
-                found[int(stat.parent.name)] = (stat.parent / "cmdline").read_text().replace("\0", " ")[:120]
-        except (OSError, ValueError):
+            if fields is not None and int(fields[3]) == sid:          # (state, ppid, pgrp, session, ...)
+                found[pid] = Path(f"/proc/{pid}/cmdline").read_text().replace("\0", " ")[:120]
+        except OSError:
             continue
     return found
 
