@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
+from companion.flow.registry import DEFAULT_FLOW
 from tests.support.tlog import tlog_messages
 from tools.launch import launch
 
@@ -26,8 +27,8 @@ def _setpoints(tlog: Path) -> list[tuple]:
     return out
 
 
-def _fly(run_dir: Path, latency_s: float = 0.0) -> dict:
-    return launch(SCENE, run_dir, start=(0.0, 0.1, 0.0), instance=7, images=False, log_sink=None,
+def _fly(run_dir: Path, latency_s: float = 0.0, flow: str = DEFAULT_FLOW) -> dict:
+    return launch(SCENE, run_dir, start=(0.0, 0.1, 0.0), instance=7, flow=flow, images=False, log_sink=None,
                   lockstep=True, latency_s=latency_s, seed=3, timeout_s=120)
 
 
@@ -90,6 +91,7 @@ def test_a_modelled_latency_sends_each_waypoint_that_much_later_in_simulated_tim
 
 
 def _fly_dir(run_dir: Path, latency_s: float) -> Path:
-    verdict = _fly(run_dir, latency_s)
+    # dis:fine: the latency is the clock's and the link's, whatever the flow (the default's flights are above)
+    verdict = _fly(run_dir, latency_s, flow="dis:fine")
     assert verdict["latency_s"] == latency_s and verdict["clock"] == "lockstep"
     return run_dir
