@@ -38,7 +38,7 @@ from companion.servo import (
     servo_step,
 )
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
-from companion.wall import WallTrack
+from companion.wall import WallTrack, wall_ahead_words
 
 log = logging.getLogger(__name__)
 
@@ -360,7 +360,7 @@ class Mission:
                 # end, rough readings of what lies behind it) would start the next look too near the wall
                 self._wall_seen = (view.here + ahead, view.across, view.wall_yaw)
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
-                why = f"no opening in sight with the wall {ahead:.2f} m ahead: not flying on"
+                why = f"no opening in sight with the wall {wall_ahead_words(ahead, view.ahead_basis)}: not flying on"
                 self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed, why)
                 raise Refusal(why, None, openings.alternative())
             lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))

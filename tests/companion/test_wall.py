@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from companion.wall import WallTrack
+from companion.wall import WallTrack, wall_ahead_words
 
 
 def test_the_distance_is_the_readings_median_once_there_are_enough_and_follows_the_vehicle():
@@ -91,3 +91,25 @@ def test_the_far_surface_counts_only_beyond_the_pairs_own_wall_reading():
     wall.add_far(0.5, 3.4, None)
     assert wall.far == [4.0, 3.9] and wall.far_distance(1.0) == pytest.approx(2.95)
     assert WallTrack().far_distance(0.0) is None
+
+
+def test_what_the_wall_ahead_rests_on_is_said_with_it():
+    """hard world seed 89: a search look refused "with the wall 0.13 m ahead" from 1.09 m before it; the 0.13 m
+    was the bound earlier looks put on the wall, not a measurement."""
+    measured = WallTrack()
+    for here in (0.0, 0.2, 0.4):
+        measured.add(here, 0.0, 3.0 - here, None, None)
+    assert measured.view_basis(0.4, 0.0) == (pytest.approx(2.6), pytest.approx(2.6), "measured")
+    rough = WallTrack()
+    for here in (0.0, 0.2, 0.4):
+        rough.add(here, 0.0, None, 2.4 - here, None)
+    assert rough.view_basis(0.4, 0.0) == (None, pytest.approx(2.0), "rough")
+    bounded = WallTrack(prior=0.55)                      # earlier looks allow the wall 0.55 m along: nothing read
+    assert bounded.view_basis(0.4, 0.0) == (None, pytest.approx(0.15), "bound")
+    for here in (0.0, 0.2, 0.4):                         # readings that jump are held to the bound
+        bounded.add(here, 0.0, (1.5, 2.9, 1.2)[int(here / 0.2 + 0.5)], None, None)
+    assert bounded.view_basis(0.4, 0.0) == (pytest.approx(0.15), pytest.approx(0.15), "bound")
+    assert WallTrack().view_basis(0.0, 0.0) == (None, None, None)
+    assert wall_ahead_words(0.13, "bound").startswith("possibly as near as 0.13 m ahead")
+    assert wall_ahead_words(0.9, "rough") == "about 0.90 m ahead (read without an opening in view)"
+    assert wall_ahead_words(0.9, "measured") == "0.90 m ahead"
