@@ -13,7 +13,7 @@ from pathlib import Path
 
 from companion.clock import LockstepError
 from companion.flow.registry import DEFAULT_FLOW
-from companion.gap import get_detector
+from companion.gap import blind_detector, get_detector
 from companion.link import BACKENDS, LinkError, make_link, parse_endpoint
 from companion.lockstep import open_clock
 from companion.mission import Mission, MissionConfig, State
@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
         parse_endpoint(args.connect)
         parse_endpoint(args.truth)
         flow = make_flow(args.flow, args.raft_weights)
-        detector = get_detector(args.detector)
+        detector, blind = get_detector(args.detector), blind_detector(args.detector)
         from companion.camera import SplatCamera
 
         clock, poses = open_clock(args.truth, args.lockstep)
@@ -170,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
         link.telemetry.listeners.append(recording.telemetry)
     mission = Mission(link, camera, flow, detector, runlog,
                       config=MissionConfig(altitude_m=args.altitude, finish=args.finish,
-                                           perception_latency_s=args.latency), recording=recording)
+                                           perception_latency_s=args.latency), recording=recording,
+                      blind_detector=blind)
     signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops us with SIGTERM: end like Ctrl-C
     try:
         result = mission.run()

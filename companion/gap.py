@@ -21,6 +21,7 @@ Both detectors take an H×W×2 float flow (u right, v down, pixels) and return a
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 from dataclasses import dataclass
 
@@ -154,7 +155,9 @@ class ParallaxGapConfig:
                                       # significant step (see _holes_past_the_end).  Off: it lifts RAFT's masks
                                       # (random seeds 7 and 8: 90.8 -> 94.6 % and 92.4 -> 93.4 % detected), but
                                       # flown on hard-world seeds 67, 77, 78 and 79 it lost one or two flights on
-                                      # each (other flights, other near-threshold judgements; docs/perception.md)
+                                      # each (other flights, other near-threshold judgements; docs/perception.md).
+                                      # Flown since 2026-12-06 where a look has seen nothing for three frames
+                                      # (blind_detector)
     past_the_end_reach_px: int = 3    # ... set aside with this many pixels of their blurred edge
     # Where the image has texture (textured_pixels): flow elsewhere (the empty space beyond a wall's end, a plain
     # surface) is filled in from the region's edges and says nothing of its depth.
@@ -461,6 +464,15 @@ def _holes(far: np.ndarray, config: ParallaxGapConfig, a_min: float, a_max: floa
 
 
 DETECTORS = ("paper", "parallax")
+
+
+def blind_detector(name: str):
+    """The detector a look turns to once it has seen nothing for a few frames (``MissionConfig.blind_frames``):
+    detector ``name`` looking past the wall's end too (``ParallaxGapConfig.past_the_end``); None for a detector
+    without that option ("paper")."""
+    if name == "parallax":
+        return functools.partial(detect_gap_parallax, config=ParallaxGapConfig(past_the_end=True))
+    return None
 
 
 def get_detector(name: str):

@@ -176,6 +176,36 @@ def test_no_opening_seen_in_eight_frames_is_a_refusal_that_holds(tmp_path):
     assert link.calls[-1] == "hold" and link.calls.count("setpoint") >= 8
 
 
+def test_a_look_that_saw_nothing_for_blind_frames_looks_past_the_walls_end_too(tmp_path):
+    """MissionConfig.blind_frames: the detector as given for a look's first frames, then, while nothing has been
+    seen, the blind detector (the parallax detector with past_the_end); the decision log says which ran."""
+    import json
+
+    from companion.flow import make_flow_backend
+    from companion.gap import blind_detector, get_detector
+
+    calls = []
+
+    def counted(name, detector):
+        def detect(flow):
+            calls.append(name)
+            return detector(flow)
+        return detect
+
+    mission = Mission(ScriptedLink(), StillCamera(), make_flow_backend("dis", preset="fast"),
+                      counted("plain", get_detector("parallax")), RunLog(tmp_path, images=False),
+                      config=MissionConfig(takeoff_timeout_s=0.3, preflight_timeout_s=0.3, search_shift_m=0.0),
+                      blind_detector=counted("blind", blind_detector("parallax")))
+    result = mission.run()
+    mission.record.runlog.close()
+    assert result.reason == "no opening found in 8 frames: nothing seen to fly through"
+    flags = [json.loads(line)["past_the_end"] for line in (tmp_path / "decisions.jsonl").read_text().splitlines()]
+    assert flags == [False] * 3 + [True] * 5
+    assert "plain" in calls and "blind" in calls and calls == sorted(calls, key=lambda c: c == "blind")
+    assert blind_detector("paper") is None
+    assert blind_detector("parallax").keywords["config"].past_the_end
+
+
 def test_refused_it_looks_again_from_either_side_of_the_start_before_holding(tmp_path):
     """The search (MissionConfig.search_shift_m): refused from the start, the vehicle looks again from 1.5 m to
     one side of the start's axis and then the other, each a full look of its own, and holds only when all three
