@@ -16,7 +16,8 @@ from companion.flow.registry import DEFAULT_FLOW
 from companion.gap import blind_detector, get_detector
 from companion.link import BACKENDS, LinkError, make_link, parse_endpoint
 from companion.lockstep import open_clock
-from companion.mission import Mission, MissionConfig, State
+from companion.mission import Mission
+from companion.mission_config import MissionConfig, State
 from companion.runlog import RunLog
 
 log = logging.getLogger("flowgap-companion")

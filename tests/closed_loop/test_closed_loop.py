@@ -11,7 +11,8 @@ from companion.camera import SplatCamera
 from companion.flow import make_flow_backend
 from companion.gap import get_detector
 from companion.link import make_link
-from companion.mission import Mission, MissionConfig, State
+from companion.mission import Mission
+from companion.mission_config import MissionConfig, State
 from companion.runlog import RunLog
 from scenes.collision import load_collision
 from sitl_vehicle.modes import FlightMode

@@ -13,7 +13,8 @@ import pytest
 from companion.camera import Frame
 from companion.clock import _ClockBase
 from companion.link.base import AutopilotLink, LinkError
-from companion.mission import Mission, MissionConfig, State
+from companion.mission import Mission
+from companion.mission_config import MissionConfig, State
 from companion.opening import OpeningConfig
 from companion.runlog import RunLog
 

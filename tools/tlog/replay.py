@@ -42,7 +42,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     from companion.flow.colour import flow_to_colour
     from companion.flow.registry import make_flow_backend, parse_backend
     from companion.gap import get_detector
-    from companion.mission import MissionConfig
+    from companion.mission_config import MissionConfig
     from companion.opening import OpeningTracker, candidates_in
     from companion.perception import perceive
     from scenes import PinholeCamera, Pose, load_scene, render_splats
