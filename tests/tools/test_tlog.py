@@ -538,3 +538,31 @@ def test_ardusub_third_party_log(tmp_path):
     written = write_outputs(rep, tmp_path, plots=False)
     assert json.loads((tmp_path / "metrics.json").read_text())["vehicle"]["type"] == "submarine"
     assert written["plots"] == {}
+
+
+def test_replay_uses_the_detector_each_frame_was_flown_with(tmp_path, monkeypatch):
+    """A blind look's frames (decisions.jsonl's past_the_end) are replayed with the blind detector, the others with
+    the flight's own."""
+    import companion.gap as gap
+    from tools.tlog.replay import replay
+
+    used = []
+
+    def detector(name):
+        def detect(flow):
+            used.append(name)
+            return gap.detect_gap_parallax(flow)
+        return detect
+
+    monkeypatch.setattr(gap, "get_detector", lambda _name: detector("plain"))
+    monkeypatch.setattr(gap, "blind_detector", lambda _name: detector("blind"))
+    (tmp_path / "summary.json").write_text(json.dumps({"scene": "window1_brick", "flow": "dis:fast",
+                                                       "detector": "parallax"}))
+    level = [1.0, 0.0, 0.0, 0.0]
+    frames = [{"step": n, "time_s": float(n), "position_true": [0.2 * n, 0.0, -1.5], "attitude_true": level,
+               "position_est": [0.2 * n, 0.0, -1.5], "attitude_est": [0.0, 0.0, 0.0]} for n in range(4)]
+    (tmp_path / "frames.jsonl").write_text("".join(json.dumps(f) + "\n" for f in frames))
+    decisions = [{"step": n, "centroid_used": None, "past_the_end": n == 3} for n in (1, 2, 3)]
+    (tmp_path / "decisions.jsonl").write_text("".join(json.dumps(d) + "\n" for d in decisions))
+    result = replay(tmp_path)
+    assert result["steps"] == 3 and used == ["plain", "plain", "blind"]

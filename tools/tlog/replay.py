@@ -41,7 +41,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     :class:`companion.recording.FlightRecording` to log the replay into."""
     from companion.flow.colour import flow_to_colour
     from companion.flow.registry import make_flow_backend, parse_backend
-    from companion.gap import get_detector
+    from companion.gap import blind_detector, get_detector
     from companion.mission_config import MissionConfig
     from companion.opening import OpeningTracker, candidates_in
     from companion.perception import perceive
@@ -60,6 +60,8 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     name, options = parse_backend(flow_spec)
     backend = make_flow_backend(name, **options)
     detect = get_detector(detector_name)
+    # the frames a blind look saw past the wall's end with (decisions.jsonl's past_the_end), replayed so too
+    detect_blind = blind_detector(detector_name) or detect
     spec, cloud = load_scene(summary["scene"])
     camera = PinholeCamera()
     openings = OpeningTracker()   # the image phase of the mission's tracking: its centroid_used
@@ -78,8 +80,10 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
         rgb = render(step)
         before, now = frames[step - 1].get("position_est"), frames[step].get("position_est")
         moved = math.dist(before, now) if before is not None and now is not None else None
+        blind = decisions.get(step, {}).get("past_the_end", False)
         p = perceive(prev, rgb, frames[step - 1]["attitude_est"], frames[step]["attitude_est"], camera.K,
-                     backend, detect, baseline_m=moved, min_baseline_m=MissionConfig().min_baseline_m)
+                     backend, detect_blind if blind else detect, baseline_m=moved,
+                     min_baseline_m=MissionConfig().min_baseline_m)
         seen = candidates_in(p.detection, camera.K, frames[step]["attitude_est"], heading)
         used = openings.observe(seen, (0.0, 0.0), None, float(camera.K[0, 0]), camera.width,
                                 camera.height).target_px
