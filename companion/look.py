@@ -72,7 +72,7 @@ class FrameView:
     across: float                   # ... and across it (right), metres
     far: float | None               # the far surface through the tracked opening (m), when seen
     area_frac: float                # the shown detection's share of the frame
-    ahead_basis: str | None = None  # what ``ahead`` rests on (companion.wall.WallTrack.view_basis)
+    ahead_basis: str | None = None  # what ``ahead`` rests on (companion.wall.WallTrack.view)
 
 
 def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: float, still: bool, K,
@@ -126,7 +126,7 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
     # from sights taken 1.4-3 m across put the wall up to 1.4 m too near; looks stopped 1.3-2.3 m from it "with
     # the wall 1.09 m ahead", or stalled 2.5 m out, their openings scaled by that wrong distance to half their
     # size).
-    wall_distance, ahead, ahead_basis = wall.view_basis(here, across)
+    wall_distance, ahead, ahead_basis = wall.view(here, across)
     axis = tilted_pixel(((width - 1) / 2.0, (height - 1) / 2.0), K, prev_attitude[0], prev_attitude[1], looks_off)
     # the wall straight ahead of where the first frame (whose pixels the masks live in) was taken
     seen_distance = (wall_distance + (here - seen_from) + (seen_place[0] - across) * wall_slope(wall_yaw)

@@ -33,7 +33,7 @@ TURN_MIN_READINGS = 3           # ... once there are this many
 
 def wall_ahead_words(ahead: float, basis: str | None) -> str:
     """How near the wall is straight ahead, in words that say what the number rests on (``basis``, from
-    :meth:`WallTrack.view_basis`): a bound from earlier looks is the nearest the wall can be, not where it is
+    :meth:`WallTrack.view`): a bound from earlier looks is the nearest the wall can be, not where it is
     (measured, hard world seed 89: a look refused "with the wall 0.13 m ahead" from 1.09 m before it)."""
     if basis == "bound":
         return f"possibly as near as {ahead:.2f} m ahead (the bound earlier looks put on it; not measured here)"
@@ -98,16 +98,12 @@ class WallTrack:
         forward = wall_forward_at(self.rough[-self.min_measurements:], across, self.turn)
         return forward if forward <= self.ceiling + self.slack_m else None
 
-    def view(self, here: float, across: float) -> tuple[float | None, float | None]:
-        """(distance, ahead) from ``here`` at ``across``: the wall's distance (None before ``min_measurements``
-        readings), and the nearest it can be straight ahead (None before any bound is known)."""
-        distance, ahead, _ = self.view_basis(here, across)
-        return distance, ahead
-
-    def view_basis(self, here: float, across: float) -> tuple[float | None, float | None, str | None]:
-        """:meth:`view`, and what ``ahead`` rests on: "measured" (the wall's distance), "rough" (the latest readings
-        taken without a gap in view) or "bound" (the nearest the wall can be by earlier looks, not measured by
-        this one); None with ``ahead``."""
+    def view(self, here: float, across: float) -> tuple[float | None, float | None, str | None]:
+        """(distance, ahead, basis) from ``here`` at ``across``: the wall's distance (None before
+        ``min_measurements`` readings), the nearest it can be straight ahead (None before any bound is known), and
+        what ``ahead`` rests on: "measured" (the wall's distance), "rough" (the latest readings taken without a gap
+        in view) or "bound" (the nearest the wall can be by earlier looks, not measured by this one); None with
+        ``ahead``."""
         own = self.own(here, across)
         distance, basis = None, None
         if len(self.readings) >= self.min_measurements:
