@@ -15,7 +15,8 @@ two:
   (within ``judge_offset_m``: seen from the side, a thick wall's inner faces hide part of the opening; and a
   mask misses part of an opening far more often than it takes in wall: on hard-world views a single estimate
   was at most 0.009 m over the truth in nine cases of ten, but down to 0.042 m under it); once the wall is within
-  ``decide_within_m`` and ``min_estimates`` such estimates say that the body sphere and its margin do not fit,
+  ``decide_within_m`` and ``min_estimates`` such estimates say that the body sphere and its margin do not fit
+  (with the estimate's allowance, ``ServoConfig.size_allowance_m``),
   another candidate that fits is taken instead (once, and said so), or the opening is refused with the numbers;
   what the vehicle steers and pushes by is the smaller of that radius after the latest estimate and after the
   one before (none before two): one view does not decide a push;
@@ -40,6 +41,7 @@ from companion.servo import (
     TURN_NEGLIGIBLE_RAD,
     ServoConfig,
     alignment_tolerance,
+    judged_tolerance,
     metric_offset,
     normalised_error,
     wall_slope,
@@ -327,9 +329,9 @@ class OpeningTracker:
             self.radius_trail.append(radius)
         refusal = None
         judged = len(self.close_radii) >= self.config.min_estimates
-        if judged and alignment_tolerance(radius, self.servo) < 0:
+        if judged and judged_tolerance(radius, self.servo) < 0:
             fits = [(c, p, radius_m(c)) for c, p in placed if chosen is None or c is not chosen[0]]
-            fits = [f for f in fits if alignment_tolerance(f[2], self.servo) >= 0]
+            fits = [f for f in fits if judged_tolerance(f[2], self.servo) >= 0]
             too_small = self.describe_too_small(chosen[0].detection if chosen is not None else None, radius,
                                                 depth(chosen[0].target_px) if chosen is not None else wall_distance_m,
                                                 focal_px)
@@ -407,13 +409,18 @@ class OpeningTracker:
         return max(ones, key=lambda e: max(e.radii)).place(window)
 
     def describe_too_small(self, detection, radius_m: float, wall_distance_m: float, focal_px: float) -> str:
-        """'opening 0.31 × 0.42 m (0.30 m clear) is narrower than the vehicle's 0.38 m plus 0.10 m margin'."""
+        """'opening 0.31 × 0.42 m (0.30 m clear) is narrower than the vehicle's 0.38 m plus 0.10 m margin'; one
+        judged no narrower than that, but within the estimate's allowance of it, is called too close to tell."""
         s = self.servo
         size = ""
         if detection is not None and detection.mask.any():
             ys, xs = np.nonzero(detection.mask)
             scale = (wall_distance_m + s.wall_thickness_m) / focal_px
             size = f"{(xs.max() - xs.min() + 1) * scale:.2f} × {(ys.max() - ys.min() + 1) * scale:.2f} m "
+        if alignment_tolerance(radius_m, s) >= 0:
+            return (f"opening {size}({2 * radius_m:.3f} m clear) is too near the vehicle's {2 * s.body_radius_m:.2f} m "
+                    f"plus {2 * s.clearance_margin_m:.2f} m margin to tell, within the size estimate's "
+                    f"{2 * s.size_allowance_m:.3f} m allowance")
         return (f"opening {size}({2 * radius_m:.2f} m clear) is narrower than the vehicle's "
                 f"{2 * s.body_radius_m:.2f} m plus {2 * s.clearance_margin_m:.2f} m margin")
 

@@ -48,6 +48,11 @@ class ServoConfig:
     # was still 0.27 m off when the wall came within reach, and the push met its edge).
     body_radius_m: float = 0.19  # the vehicle's collision sphere (quad250's: 0.38 m across, props included)
     clearance_margin_m: float = 0.05  # kept free between the sphere and the opening's edge, each side
+    size_allowance_m: float = 0.007  # a judged clear radius must beat the sphere and its margin by this too: its
+                                     # error near the need (measured, hard world seeds 87-91: the four impassable
+                                     # openings flown through, 0.224-0.238 m clear, none touched, had been judged
+                                     # 0.0007-0.0066 m over the 0.24 m needed; flown again with it, seeds 88-91
+                                     # refused every impassable one and lost 1-3 passable flights each)
     metric_gain: float = 0.7  # fraction of the metric offset removed per step
     metric_max_step_m: float = 0.25  # |Δy|, |Δz| limit of a metric step
     metric_slowdown_m: float = 0.5  # the forward step shrinks as the offset grows toward this (to the minimum
@@ -104,6 +109,12 @@ def alignment_tolerance(clear_radius_m: float, config: ServoConfig) -> float:
     return clear_radius_m - config.body_radius_m - config.clearance_margin_m
 
 
+def judged_tolerance(judged_radius_m: float, config: ServoConfig) -> float:
+    """:func:`alignment_tolerance` of an opening's judged clear radius (its size estimates'), less the estimate's
+    allowance (``size_allowance_m``): what fit and refusal decide by."""
+    return alignment_tolerance(judged_radius_m - config.size_allowance_m, config)
+
+
 def normalised_error(centroid: tuple[float, float], width: int, height: int) -> tuple[float, float]:
     """docs/design.md step 5: e_u = (u − W/2)/(W/2), e_v = (v − H/2)/(H/2)."""
     u, v = centroid
@@ -142,21 +153,21 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
                 sightings: int = 0, close_sightings: int = 0, judged_estimates: int | None = None,
                 lag_m: tuple[float, float] = (0.0, 0.0)) -> ServoStep:
     """One step of the metric law, from the body's (right, down) offset to the opening's clear centre in
-    metres and the opening's clear radius: remove ``metric_gain`` of the offset (clamped), move forward less
-    the further off it is, never closer than ``hold_distance_m`` while the sphere would not clear the edges,
-    and push once it would (and the wall is close, or the opening large, or the step budget spent; never
-    while it would not: ``aligned`` tells the caller).  Whether it would: from ``clearance_here_m``, the
-    distance from the heading's axis to the opening's nearest edge seen in this frame, when there is one (an
-    elongated opening leaves room along its length), else from the offset and the clear radius.  Not seen in
-    this frame, it pushes only with room to spare, on a place ``sightings`` frames placed, ``close_sightings``
-    of them from near the wall; never on one fewer than ``push_sightings`` frames placed (after a switch,
-    the new one's), where it creeps on as for an unseen place; and on one with little room to spare only once
-    ``judged_estimates`` of its size estimates (``judged_tight`` at least) were taken in front of it (None: not
-    counted).  ``error``: the image error, for the record.  ``lag_m``: how far (right, down) the waypoint the
-    vehicle is on its way to lies from where the frame was taken; a centring step goes from the waypoint, the
-    push from where the vehicle is."""
+    metres and the opening's clear radius (judged, less its ``size_allowance_m``): remove ``metric_gain`` of the
+    offset (clamped), move forward less the further off it is, never closer than ``hold_distance_m`` while the
+    sphere would not clear the edges, and push once it would (and the wall is close, or the opening large, or the
+    step budget spent; never while it would not: ``aligned`` tells the caller).  Whether it would: from
+    ``clearance_here_m``, the distance from the heading's axis to the opening's nearest edge seen in this frame,
+    when there is one (an elongated opening leaves room along its length), else from the offset and the clear
+    radius.  Not seen in this frame, it pushes only with room to spare, on a place ``sightings`` frames placed,
+    ``close_sightings`` of them from near the wall; never on one fewer than ``push_sightings`` frames placed
+    (after a switch, the new one's), where it creeps on as for an unseen place; and on one with little room to
+    spare only once ``judged_estimates`` of its size estimates (``judged_tight`` at least) were taken in front of
+    it (None: not counted).  ``error``: the image error, for the record.  ``lag_m``: how far (right, down) the
+    waypoint the vehicle is on its way to lies from where the frame was taken; a centring step goes from the
+    waypoint, the push from where the vehicle is."""
     budget_spent = step_index + 1 >= config.step_budget
-    tolerance = alignment_tolerance(clear_radius_m, config)
+    tolerance = judged_tolerance(clear_radius_m, config)
     fresh = clearance_here_m is not None
     limit = config.metric_max_step_m
 

@@ -11,9 +11,9 @@ this replays it for other thicknesses:
   (exact where the opening's width bounds its clear circle, an upper bound of the change otherwise);
 - the judgement is made as :class:`companion.opening.OpeningTracker` makes it: from the ``min_estimates``-th
   judged estimate of an opening on (a log's count falling back to 1 starts another), refused as soon as the upper
-  quartile of the latest ``radius_window`` falls short of the body radius and its margin.  A flight counts as
-  refused by the replay if any opening it judged is (the switch to another opening in view that a refusal may
-  make instead is not replayed).
+  quartile of the latest ``radius_window``, less the size allowance, falls short of the body radius and its
+  margin.  A flight counts as refused by the replay if any opening it judged is (the switch to another opening in
+  view that a refusal may make instead is not replayed).
 
 What it tells: which flights flown through the replay refuses (a passable one lost; an impassable one refused, as
 it must be).  What it cannot: how a flight refused for its size would have gone had it been judged to fit; those
@@ -87,7 +87,7 @@ def refused_for_size(decisions: list[dict], judging, flown, focal_px: float) -> 
     """Whether the tracker ``judging`` (another wall thickness than ``flown``'s), replayed on a flight's decision
     lines, refuses an opening of it."""
     from companion.opening import upper_quartile
-    from companion.servo import alignment_tolerance
+    from companion.servo import judged_tolerance
 
     config = judging.config
     estimates: list[float] = []
@@ -98,7 +98,7 @@ def refused_for_size(decisions: list[dict], judging, flown, focal_px: float) -> 
             estimates = []               # another opening, or the tracked one's history forgotten
         estimates.append(rescaled(d, judging, flown, focal_px))
         if (len(estimates) >= config.min_estimates
-                and alignment_tolerance(upper_quartile(estimates, config.radius_window), judging.servo) < 0):
+                and judged_tolerance(upper_quartile(estimates, config.radius_window), judging.servo) < 0):
             return True
     return False
 
@@ -135,7 +135,8 @@ def replay_run(rows: list[dict], thicknesses: list[float], focal_px: float) -> d
                     now_refused.append(r["scene"])
                 else:
                     imp_flown += 1
-            if r["refused"] and "is narrower than" in (r.get("companion_reason") or "") and not refuses:
+            reason = r.get("companion_reason") or ""
+            if r["refused"] and ("is narrower than" in reason or "to tell, within" in reason) and not refuses:
                 undecided.append(r["scene"])
         out[f"{t:g}"] = {"passable": sum(r["passable"] for r in rows), "passable_through": through,
                          "impassable": sum(not r["passable"] for r in rows), "impassable_flown": imp_flown,

@@ -134,6 +134,9 @@ def test_metric_step_removes_most_of_the_offset_and_holds_off_the_wall_until_the
     cfg = ServoConfig()
     # a 0.9 m opening: clear radius 0.45 m, so the centre may be 0.45 - 0.19 - 0.05 = 0.21 m off
     assert alignment_tolerance(0.45, cfg) == pytest.approx(0.45 - cfg.body_radius_m - cfg.clearance_margin_m)
+    # ... by what it was judged, less the size estimate's allowance
+    assert metric_step((0.0, 0.0), 0.45, 1.3, 0.1, 5, cfg).tolerance_m == pytest.approx(
+        0.45 - cfg.size_allowance_m - cfg.body_radius_m - cfg.clearance_margin_m)
     far_off = metric_step((0.3, -0.1), 0.45, 1.15, 0.05, 5, cfg)
     assert far_off.delta_heading[1:] == pytest.approx((cfg.metric_gain * 0.3, -cfg.metric_gain * 0.1))
     assert far_off.aligned is False and not far_off.push
@@ -147,9 +150,9 @@ def test_metric_step_removes_most_of_the_offset_and_holds_off_the_wall_until_the
     assert centred.aligned and centred.push and centred.delta_heading[0] > 0
     # aligned by the tracked place alone, not seen in this frame, and only just fitting: no push; creep on to
     # see it again; with room to spare, push on the tracked place
-    unseen = metric_step((0.05, 0.02), 0.30, 1.3, 0.1, 5, cfg)
+    unseen = metric_step((0.05, 0.02), 0.31, 1.3, 0.1, 5, cfg)
     assert unseen.aligned and not unseen.push and unseen.delta_heading[0] == pytest.approx(cfg.probe_step_m)
-    assert metric_step((0.05, 0.02), 0.30, 0.85, 0.1, 5, cfg).delta_heading[0] == 0.0   # not that close
+    assert metric_step((0.05, 0.02), 0.31, 0.85, 0.1, 5, cfg).delta_heading[0] == 0.0   # not that close
     assert metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, sightings=3, close_sightings=1).push
     assert not metric_step((0.05, 0.02), 0.45, 1.3, 0.1, 5, cfg, sightings=2, close_sightings=2).push  # too few
     # placed often enough, but never from near the wall: what was tracked from afar is not pushed on unseen
@@ -297,7 +300,8 @@ def test_an_opening_seen_at_an_angle_is_judged_at_its_width_in_the_wall():
 
 EXACT = ServoConfig(centred_tol=0.125, close_area_frac=0.125, push_area_frac=0.25, close_distance_m=1.5,
                     push_distance_m=1.25, last_call_distance_m=1.0, body_radius_m=0.25, clearance_margin_m=0.125,
-                    roomy_tolerance_m=0.125, metric_gain=1.0, hold_distance_m=0.0, probe_floor_m=0.875)
+                    roomy_tolerance_m=0.125, metric_gain=1.0, hold_distance_m=0.0, probe_floor_m=0.875,
+                    size_allowance_m=0.0)
 
 
 def _px(e_u: float, e_v: float) -> tuple[float, float]:

@@ -75,6 +75,28 @@ def test_too_small_an_opening_is_refused_with_its_numbers_and_a_passable_one_tak
     assert sights[-1].offset_m[0] == pytest.approx((wide.clear_centre[0] - W / 2) * 1.2 / F, rel=0.05)
 
 
+def test_an_opening_judged_within_the_size_allowance_of_the_need_is_refused_as_too_close_to_tell():
+    cfg = ServoConfig()
+    need = cfg.body_radius_m + cfg.clearance_margin_m
+
+    def judged(width_px: int):
+        tracker = OpeningTracker(cfg)
+        det = rect(160 - width_px // 2, 60, 160 - width_px // 2 + width_px - 1, 180)
+        for _ in range(2):
+            tracker.observe([cand(det)], (0.0, 0.0), None, F, W, H)
+        return [tracker.observe([cand(det)], (0.0, 0.0), 1.2, F, W, H) for _ in range(3)][-1]
+
+    close = judged(51)          # judged just wider than the need, by less than the allowance
+    assert need <= close.estimate_m < need + cfg.size_allowance_m
+    assert close.refusal == (f"opening 0.44 × 1.04 m ({2 * close.estimate_m:.3f} m clear) is too near the vehicle's "
+                             "0.38 m plus 0.10 m margin to tell, within the size estimate's 0.014 m allowance: "
+                             "not flying through")
+    clear = judged(53)          # one pixel wider: past the allowance, flown
+    assert clear.estimate_m >= need + cfg.size_allowance_m and clear.refusal is None
+    narrow = judged(50)         # under the need: narrower, as before
+    assert narrow.estimate_m < need and "is narrower than the vehicle's" in narrow.refusal
+
+
 def test_the_clearance_flying_straight_on_counts_the_room_along_an_elongated_opening():
     slot = rect(100, 100, 260, 140)                      # long and low: 161 × 41 px
     assert edge_distance_px(slot.mask, (130.0, 120.0)) == pytest.approx(21.0, abs=1.0)   # far from its centre,

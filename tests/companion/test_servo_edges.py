@@ -14,7 +14,7 @@ import pytest
 
 from companion import servo
 from companion.gap import ParallaxGapConfig
-from companion.servo import ServoConfig, alignment_tolerance, metric_step, wall_readings_agree, wall_slope
+from companion.servo import ServoConfig, judged_tolerance, metric_step, wall_readings_agree, wall_slope
 from tests.companion.synthetic import SMALL, box
 
 H, W = SMALL
@@ -256,9 +256,10 @@ def test_a_caller_that_does_not_say_how_often_the_opening_was_placed_gets_no_pus
 
 def test_an_opening_exactly_roomy_needs_no_estimates_from_in_front():
     # sizes a float subtracts exactly, so that the tolerance is the roomy one to the last bit
-    cfg = dataclasses.replace(ServoConfig(), body_radius_m=0.25, clearance_margin_m=0.125, roomy_tolerance_m=0.125)
+    cfg = dataclasses.replace(ServoConfig(), body_radius_m=0.25, clearance_margin_m=0.125, roomy_tolerance_m=0.125,
+                              size_allowance_m=0.0)
     radius = 0.5
-    assert alignment_tolerance(radius, cfg) == cfg.roomy_tolerance_m
+    assert judged_tolerance(radius, cfg) == cfg.roomy_tolerance_m
     step = metric_step((0.0, 0.0), radius, 1.2, 0.3, 1, cfg, clearance_here_m=radius, sightings=3,
                        judged_estimates=0)
     assert step.judged and step.push

@@ -42,7 +42,7 @@ def test_a_frame_rescaled_for_the_thickness_flown_is_its_own_estimate_and_thinne
 
 
 def test_the_judgement_is_replayed_as_the_tracker_makes_it():
-    just_fits = [frame(0.247, count=1), frame(0.243, count=2), frame(0.242, count=3)]
+    just_fits = [frame(0.257, count=1), frame(0.253, count=2), frame(0.252, count=3)]
     assert not fit_replay.refused_for_size(just_fits, AS_FLOWN, AS_FLOWN, F)
     assert fit_replay.refused_for_size(just_fits, THIN, AS_FLOWN, F)
     # two estimates are no judgement; frames not judged (from the side, far) do not count
@@ -69,7 +69,7 @@ def _sweep(tmp_path, flights: dict) -> None:
 
 
 def test_a_sweep_replayed_names_the_flights_a_thinner_wall_would_have_refused(tmp_path, capsys):
-    tight = [frame(0.247, count=1), frame(0.243, count=2), frame(0.242, count=3)]
+    tight = [frame(0.257, count=1), frame(0.253, count=2), frame(0.252, count=3)]
     roomy = [frame(0.35, count=1), frame(0.34, count=2), frame(0.36, count=3)]
     refused = [frame(0.2, count=1), frame(0.21, count=2)]          # logged before its refusing frame was
     _sweep(tmp_path / "run", {
