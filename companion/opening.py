@@ -486,3 +486,13 @@ def _nearest(items, reference: Point | None, gate: float, key):
         return None
     best = min(items, key=lambda item: math.dist(key(item), reference))
     return best if math.dist(key(best), reference) <= gate else None
+
+
+# the words of describe_too_small's two refusals, for tools that sort a flight's refusal by its reason
+_TOO_SMALL_WORDS = ("is narrower than", "to tell, within")
+
+
+def is_size_refusal(reason: str | None) -> bool:
+    """Whether a refusal's reason is one of :meth:`OpeningTracker.describe_too_small`'s: judged too small, or too
+    near the need to tell."""
+    return reason is not None and any(words in reason for words in _TOO_SMALL_WORDS)

@@ -115,7 +115,7 @@ def replay_run(rows: list[dict], thicknesses: list[float], focal_px: float) -> d
     """Per thickness: passable flights through, impassable ones flown, the flights whose outcome the replay
     changes (``lost``: passable, flown through, refused by the replay; ``now_refused``: impassable, flown, refused
     by it) and those it cannot tell (``undecided``: refused for size as flown, judged to fit by the replay)."""
-    from companion.opening import OpeningTracker
+    from companion.opening import OpeningTracker, is_size_refusal
 
     flown = OpeningTracker()
     as_flown = {r["scene"]: refused_for_size(r["decisions"], flown, flown, focal_px) for r in rows}
@@ -135,8 +135,7 @@ def replay_run(rows: list[dict], thicknesses: list[float], focal_px: float) -> d
                     now_refused.append(r["scene"])
                 else:
                     imp_flown += 1
-            reason = r.get("companion_reason") or ""
-            if r["refused"] and ("is narrower than" in reason or "to tell, within" in reason) and not refuses:
+            if r["refused"] and is_size_refusal(r.get("companion_reason")) and not refuses:
                 undecided.append(r["scene"])
         out[f"{t:g}"] = {"passable": sum(r["passable"] for r in rows), "passable_through": through,
                          "impassable": sum(not r["passable"] for r in rows), "impassable_flown": imp_flown,

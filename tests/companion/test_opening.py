@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from companion.gap import _from_contour
-from companion.opening import Candidate, OpeningTracker, edge_distance_px
+from companion.opening import Candidate, OpeningTracker, edge_distance_px, is_size_refusal
 from companion.servo import ServoConfig
 
 W, H, F = 320, 240, 156.4
@@ -95,6 +95,10 @@ def test_an_opening_judged_within_the_size_allowance_of_the_need_is_refused_as_t
     assert clear.estimate_m >= need + cfg.size_allowance_m and clear.refusal is None
     narrow = judged(50)         # under the need: narrower, as before
     assert narrow.estimate_m < need and "is narrower than the vehicle's" in narrow.refusal
+    # both read back as refusals for size (tools.fit_replay sorts a sweep's refusals so); others do not
+    assert is_size_refusal(close.refusal) and is_size_refusal(narrow.refusal)
+    assert not is_size_refusal("no opening found in 8 frames: nothing seen to fly through")
+    assert not is_size_refusal(None)
 
 
 def test_the_clearance_flying_straight_on_counts_the_room_along_an_elongated_opening():
