@@ -425,6 +425,16 @@ class OpeningTracker:
                 f"{2 * s.body_radius_m:.2f} m plus {2 * s.clearance_margin_m:.2f} m margin")
 
 
+# the words of describe_too_small's two refusals, for tools that sort a flight's refusal by its reason
+_TOO_SMALL_WORDS = ("is narrower than", "to tell, within")
+
+
+def is_size_refusal(reason: str | None) -> bool:
+    """Whether a refusal's reason is one of :meth:`OpeningTracker.describe_too_small`'s: judged too small, or too
+    near the need to tell."""
+    return reason is not None and any(words in reason for words in _TOO_SMALL_WORDS)
+
+
 def seen_slot_width(half_width_m: float, distance_m: float, turn_rad: float, thickness_m: float) -> float:
     """How wide (tangent of the angle, left to right) a camera centred on it sees the way through a slot of
     ``half_width_m`` in a wall ``thickness_m`` deep whose face is ``distance_m`` ahead on the axis and turned by
@@ -487,12 +497,3 @@ def _nearest(items, reference: Point | None, gate: float, key):
     best = min(items, key=lambda item: math.dist(key(item), reference))
     return best if math.dist(key(best), reference) <= gate else None
 
-
-# the words of describe_too_small's two refusals, for tools that sort a flight's refusal by its reason
-_TOO_SMALL_WORDS = ("is narrower than", "to tell, within")
-
-
-def is_size_refusal(reason: str | None) -> bool:
-    """Whether a refusal's reason is one of :meth:`OpeningTracker.describe_too_small`'s: judged too small, or too
-    near the need to tell."""
-    return reason is not None and any(words in reason for words in _TOO_SMALL_WORDS)
