@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from companion.clock import LockstepError
+from companion.edges import EdgeConfig
 from companion.flow.registry import DEFAULT_FLOW
 from companion.gap import blind_detector, get_detector
 from companion.link import BACKENDS, LinkError, make_link, parse_endpoint
@@ -51,6 +52,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--raft-weights", type=Path, help="RAFT weights file (default: the shipped ones)")
     p.add_argument("--detector", choices=["parallax", "paper"], default="parallax",
                    help="gap detector: ours (parallax) or the paper's colour/Canny pipeline (default %(default)s)")
+    p.add_argument("--edges", choices=["photo", "flow"], default="photo",
+                   help="how an opening's edge is read: photo (default) decides the pixels near the detector's edge "
+                        "again by which of the two depths predicts the next frame's colour (companion.edges); flow "
+                        "keeps the detector's mask as the flow shows it (blurred by a pixel or more, the behaviour "
+                        "before 2026-12-06)")
     p.add_argument("--render-backend", choices=["cpu", "torch"], default="cpu", help="splat renderer")
     p.add_argument("--altitude", type=float, default=1.5, help="takeoff altitude in metres (default 1.5)")
     p.add_argument("--finish", choices=["hold", "land"], default="hold", help="after the traversal (default hold)")
@@ -172,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     mission = Mission(link, camera, flow, detector, runlog,
                       config=MissionConfig(altitude_m=args.altitude, finish=args.finish,
                                            perception_latency_s=args.latency), recording=recording,
-                      blind_detector=blind)
+                      blind_detector=blind, edges=EdgeConfig() if args.edges == "photo" else None)
     signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops us with SIGTERM: end like Ctrl-C
     try:
         result = mission.run()
@@ -188,8 +194,8 @@ def main(argv: list[str] | None = None) -> int:
         link.close()
         clock.close()       # in lockstep: the vehicle's last second, to settle before its verdict
         camera.close()
-    summary = {"scene": args.scene, "flow": args.flow, "detector": args.detector, "link": args.link,
-               "clock": clock.name, "latency_s": args.latency, **result.as_dict()}
+    summary = {"scene": args.scene, "flow": args.flow, "detector": args.detector, "edges": args.edges,
+               "link": args.link, "clock": clock.name, "latency_s": args.latency, **result.as_dict()}
     runlog.summary(summary)
     push = f", pushed {result.push_length_m:.2f} m" if result.push_length_m else ""
     board = runlog.storyboard(mission.record.storyboard.render(

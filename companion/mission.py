@@ -20,6 +20,7 @@ import time
 import numpy as np
 
 from companion.camera import CameraError, FrameSource
+from companion.edges import EdgeConfig
 from companion.flightrecord import FlightRecord
 from companion.link.base import AutopilotLink, LinkError, LinkLost
 from companion.look import across_heading, along_heading, next_look_step, see_frame
@@ -46,12 +47,14 @@ class Mission:
     def __init__(self, link: AutopilotLink, camera: FrameSource, flow, detector, runlog: RunLog,
                  servo: ServoConfig | None = None, config: MissionConfig | None = None,
                  tracker: CentroidFilter | None = None, derotate_flow: bool = True,
-                 openings: OpeningConfig | None = None, recording=None, blind_detector=None):
+                 openings: OpeningConfig | None = None, recording=None, blind_detector=None,
+                 edges: EdgeConfig | None = EdgeConfig()):
         self.link = link
         self.camera = camera
         self.flow = flow
         self.detector = detector
         self.blind_detector = blind_detector or detector   # after config.blind_frames frames that saw nothing
+        self.edges = edges    # openings' edges read again from the frames (companion.edges); None: as flow shows
         self.record = FlightRecord(runlog, recording)   # what it saw and decided, written as it flies
         self.servo = servo or ServoConfig()
         self.config = config or MissionConfig()
@@ -240,7 +243,7 @@ class Mission:
             still = moved < self.config.min_baseline_m
             detector = self.detector if ever_seen or k < self.config.blind_frames else self.blind_detector
             seen = perceive(prev.rgb, frame.rgb, prev_attitude, attitude, self.camera.K, self.flow, detector,
-                            self.derotate, moved, self.config.min_baseline_m)
+                            self.derotate, moved, self.config.min_baseline_m, self.edges)
             self.record.frame_poses(n, frame, position, attitude)
             view = see_frame(seen, prev.rgb, prev_position, position, prev_attitude, moved, still, self.camera.K,
                              self.yaw, openings, wall)

@@ -8,8 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.edges import EdgeConfig, refine_detection
 from companion.gap import _no_gap
-from companion.motion import derotate, level_pixel
+from companion.motion import body_to_world_from_euler, level_pixel, rotational_flow
 
 
 @dataclass(frozen=True)
@@ -23,15 +24,18 @@ class Perception:
 
 def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: np.ndarray, flow_backend,
              detector, derotate_flow: bool = True, baseline_m: float | None = None,
-             min_baseline_m: float = 0.0) -> Perception:
+             min_baseline_m: float = 0.0, edges: EdgeConfig | None = None) -> Perception:
     """``prev_attitude``/``attitude``: (roll, pitch, yaw) estimates at the two frames' time stamps.
     ``baseline_m``: how far the camera moved between them; under ``min_baseline_m`` the pair has no parallax to
     show and is not looked at (the flow is still returned): the flow of a camera that did not move is noise, and
-    the detector finds "openings" in it."""
+    the detector finds "openings" in it.  ``edges``: read each opening's edge again from the two frames
+    (:mod:`companion.edges`); None leaves the detector's masks as they are."""
     t0 = time.perf_counter()
     flow = flow_backend.estimate(prev_rgb, rgb)
-    if derotate_flow:
-        flow = derotate(flow, K, prev_attitude, attitude)
+    h, w = flow.shape[:2]
+    rotational = (rotational_flow(K, body_to_world_from_euler(*prev_attitude), body_to_world_from_euler(*attitude),
+                                  h, w) if derotate_flow else np.zeros((h, w, 2), np.float32))
+    flow = flow - rotational
     flow_ms = (time.perf_counter() - t0) * 1000
     t0 = time.perf_counter()
     if baseline_m is not None and baseline_m < min_baseline_m:
@@ -39,6 +43,8 @@ def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: 
                             f"{min_baseline_m:.3f} m a parallax needs: not looked at", "baseline")
     else:
         detection = detector(flow)
+        if edges is not None:
+            detection = refine_detection(detection, prev_rgb, rgb, flow, rotational, K, edges)
     detect_ms = (time.perf_counter() - t0) * 1000
     # The servo reads image position as position error: measure it in a level camera (see level_pixel).
     level = (level_pixel(detection.centroid, K, attitude[0], attitude[1])

@@ -301,6 +301,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--flow", default=DEFAULT_FLOW,
                    help="companion flow backend (default %(default)s: the shipped RAFT; dis:fine for OpenCV DIS)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"])
+    p.add_argument("--edges", default="photo", choices=["photo", "flow"],
+                   help="how the companion reads an opening's edge: photo (default), decided again from the two "
+                        "frames; flow, the detector's mask as the flow shows it (before 2026-12-06)")
     p.add_argument("-o", "--out", type=Path, default=Path("runs/eval_flights"),
                    help="output directory (default %(default)s)")
     p.add_argument("--resume", action="store_true",
@@ -366,7 +369,9 @@ def sweep_settings(args, link_faults: LinkFaults | None) -> dict:
     """What a saved flight must share with a sweep that resumes it."""
     return {"world": args.world, "seed": args.seed, "flow": args.flow, "detector": args.detector,
             "clock": "realtime" if args.realtime else "lockstep", "speed": args.speed if args.realtime else None,
-            "latency_s": args.latency, "link_faults": None if link_faults is None else link_faults.settings()}
+            "latency_s": args.latency, "link_faults": None if link_faults is None else link_faults.settings(),
+            # absent from sweeps flown before the photometric edges: theirs were the flow's, and resume so
+            **({} if args.edges == "flow" else {"edges": args.edges})}
 
 
 def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None) -> int:
@@ -386,8 +391,8 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
             for scene in scenes for i in range(args.starts)]
     if len({job.key for job in jobs}) < len(jobs):
         return _fail("two scenes share a name; give each scene once")
-    settings = FlightSettings(flow=args.flow, detector=args.detector, lockstep=not args.realtime, speed=args.speed,
-                              latency_s=args.latency)
+    settings = FlightSettings(flow=args.flow, detector=args.detector, edges=args.edges, lockstep=not args.realtime,
+                              speed=args.speed, latency_s=args.latency)
 
     def make_row(job: FlightJob, verdict: dict) -> dict:
         row = {**verdict, "scene": job.label, "start_index": job.start_index, "seed": job.flight["seed"]}
@@ -416,7 +421,7 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
     # judged again with today's labels: a row reused by --resume keeps how it was flown, not how it was judged
     rows = sorted((judge(r, passable[r["scene"]]) for r in outcome.rows), key=lambda r: (r["scene"], r["start_index"]))
     summary = summarise(rows)
-    summary.update(world=args.world, flow=args.flow, detector=args.detector,
+    summary.update(world=args.world, flow=args.flow, detector=args.detector, edges=args.edges,
                    clock="realtime" if args.realtime else "lockstep",
                    speed=args.speed if args.realtime else None, latency_s=args.latency, seed=args.seed,
                    starts_per_scene=args.starts, total_wall_s=round(wall_s, 1),

@@ -134,7 +134,7 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
            link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0,
            wind: tuple[float, ...] | None = None, yaw_deg: float | None = None,
            camera_delay_s: float = 0.0, rerun: bool = False, rerun_connect: str | None = None,
-           link_faults: LinkFaults | None = None, signing_key: Path | None = None) -> dict:
+           link_faults: LinkFaults | None = None, signing_key: Path | None = None, edges: str = "photo") -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json).
 
     ``scene``: a suite name, spec ``.json`` or capture scene ``.json``; ``start`` (NED, on the ground), ``yaw_deg``
@@ -179,7 +179,8 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
         vehicle_cmd.append("--wind=" + ",".join(f"{v:g}" for v in wind))
     companion_cmd = [sys.executable, "-m", "companion", "--connect", f"udpin://127.0.0.1:{api}",
                      "--truth", f"udpin://127.0.0.1:{truth}", "--scene", scene, "--flow", flow,
-                     "--detector", detector, "--run-dir", str(run_dir / "companion"), "--altitude", f"{altitude:g}",
+                     "--detector", detector, "--edges", edges, "--run-dir", str(run_dir / "companion"),
+                     "--altitude", f"{altitude:g}",
                      "--link", link, "--latency", f"{latency_s:g}", "--camera-delay", f"{camera_delay_s:g}"]
     if not images:
         companion_cmd.append("--no-images")
@@ -251,6 +252,7 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
         "altitude_m": altitude,
         "flow": flow,
         "detector": detector,
+        "edges": edges,
         "clock": "lockstep" if lockstep else "realtime",
         "latency_s": latency_s,
         "wind": vehicle_verdict.get("wind"),
@@ -327,6 +329,9 @@ def _main(argv: list[str] | None) -> int:
     p.add_argument("--flow", default=DEFAULT_FLOW,
                    help="companion flow backend (default %(default)s: the shipped RAFT; dis:fine for OpenCV DIS)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"], help="gap detector")
+    p.add_argument("--edges", default="photo", choices=["photo", "flow"],
+                   help="how the companion reads an opening's edge: photo (default), decided again from the two "
+                        "frames; flow, the detector's mask as the flow shows it (before 2026-12-06)")
     p.add_argument("--link", default="pymavlink", choices=["pymavlink", "mavsdk"], help="companion link backend")
     p.add_argument("--seed", type=int, default=0, help="vehicle sensor-noise (and wind) seed")
     p.add_argument("--wind", type=_wind, default=None, metavar="MEAN,GUST[,FROM_DEG]",
@@ -405,7 +410,8 @@ def _main(argv: list[str] | None) -> int:
                      altitude=args.altitude,
                      link=args.link, lockstep=args.lockstep, latency_s=args.latency, wind=args.wind,
                      yaw_deg=args.yaw, camera_delay_s=args.camera_delay, rerun=args.rerun,
-                     rerun_connect=args.rerun_connect, link_faults=link_faults, signing_key=args.signing_key)
+                     rerun_connect=args.rerun_connect, link_faults=link_faults, signing_key=args.signing_key,
+                     edges=args.edges)
     if args.result:
         args.result.parent.mkdir(parents=True, exist_ok=True)
         args.result.write_text(json.dumps(verdict, indent=2) + "\n")

@@ -9,7 +9,8 @@ sweep of 100 flights judges only a dozen of them.  This renders many such openin
 - ``--pairs`` frame pairs per scene, flown toward the opening's clear centre along the start heading: the first
   frame 0.87-1.67 m from the wall (by default), a forward step of 0.12-0.22 m, a few centimetres and a few
   hundredths of a radian of jitter;
-- each pair goes through the flow backend, the derotation and the parallax detector as flown; the widest opening
+- each pair goes through the flow backend, the derotation, the parallax detector and the edges read again from the
+  frames (:mod:`companion.edges`; ``--edges flow`` leaves the detector's masks) as flown; the widest opening
   it finds is stretched to the wall's plane (:func:`companion.opening.turned_wall_stretch`, with the true turn)
   and sized by :meth:`companion.opening.OpeningTracker.clear_radius_m`, with the true distance: what is measured
   is the mask and the size estimate, not the wall's distance or turn.
@@ -154,7 +155,8 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     import cv2
 
     from companion.gap import CameraMotion, ParallaxGapConfig, clear_circle, detect_gap_parallax
-    from companion.motion import derotate
+    from companion.edges import EdgeConfig, refine_detection
+    from companion.motion import body_to_world_from_euler, rotational_flow
     from companion.opening import OpeningTracker, in_wall, turned_wall_stretch
     from companion.servo import TURN_NEGLIGIBLE_RAD, ServoConfig
     from scenes import load_scene, render_splats
@@ -189,8 +191,12 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
         pose1, att1 = approach_pose(spec, centre, near, tuple(across + rng.normal(0.0, 0.01, 2)),
                                     tuple(rng.normal(0.0, 0.01, 2)))
         first, second = render_splats(cloud, camera, pose0), render_splats(cloud, camera, pose1)
-        flow = derotate(backend.estimate(first.rgb, second.rgb), camera.K, att0, att1)
+        h, w = first.rgb.shape[:2]
+        rotational = rotational_flow(camera.K, body_to_world_from_euler(*att0), body_to_world_from_euler(*att1), h, w)
+        flow = backend.estimate(first.rgb, second.rgb) - rotational
         detection = detect_gap_parallax(flow, ParallaxGapConfig(), CameraMotion(focal_px=focal))
+        if args.edges == "photo":
+            detection = refine_detection(detection, first.rgb, second.rgb, flow, rotational, camera.K, EdgeConfig())
         truth = gt_mask(cloud, camera, pose0, first)
         n_labels, labels = cv2.connectedComponents(truth.astype(np.uint8))
         truth_px = max((clear_circle(labels == k)[1] for k in range(1, n_labels)), default=0.0)
@@ -226,6 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--distance", type=float, nargs=2, default=(0.75, 1.45), metavar=("NEAR", "FAR"),
                         help="the second frame's distance from the wall (metres); the first is a step further")
     parser.add_argument("--flow", default=DEFAULT_FLOW, help="flow backend, as flowgap-companion --flow")
+    parser.add_argument("--edges", choices=["photo", "flow"], default="photo",
+                        help="openings' edges read again from the frames, as flown (photo), or the detector's masks")
     parser.add_argument("--turned", type=float, default=3.0, metavar="DEG",
                         help="walls turned more than this count as turned in the summary")
     parser.add_argument("-o", "--out", type=Path, default=Path("runs/size_error"), help="output folder")
@@ -252,8 +260,9 @@ def main(argv: list[str] | None = None) -> int:
             scenes.append({"scene": index, **judged})
     summary = summarise(rows, scenes, args.turned)
     args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "size_error.json").write_text(json.dumps({"flow": args.flow, "seed": args.seed, "summary": summary,
-                                                          "scenes": scenes, "rows": rows}, indent=1))
+    (args.out / "size_error.json").write_text(json.dumps({"flow": args.flow, "edges": args.edges, "seed": args.seed,
+                                                          "summary": summary, "scenes": scenes, "rows": rows},
+                                                         indent=1))
     text = markdown(summary, args.flow, args.seed)
     (args.out / "size_error.md").write_text(text)
     print(text + f"-> {args.out / 'size_error.json'}")

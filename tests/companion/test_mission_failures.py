@@ -645,8 +645,9 @@ def test_the_push_starts_where_the_vehicle_was_at_the_last_frame_not_at_its_wayp
 
     link = HalfwayLink()
     link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)
+    # the still camera's frames are all alike, and the flow made up: no edge can be read from them (edges=None)
     mission = Mission(link, StillCamera(), WallWithHoleFlow(link, 2.5), WideHoleRight(), RunLog(tmp_path, images=False),
-                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01))
+                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01), edges=None)
     mission.yaw = 0.0
     frames = []
     capture = mission.camera.capture

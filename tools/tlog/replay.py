@@ -39,6 +39,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
            recording=None) -> dict:
     """Replay ``run_dir``; ``flow``/``detector`` default to what the flight used; ``recording``: a
     :class:`companion.recording.FlightRecording` to log the replay into."""
+    from companion.edges import EdgeConfig
     from companion.flow.colour import flow_to_colour
     from companion.flow.registry import make_flow_backend, parse_backend
     from companion.gap import blind_detector, get_detector
@@ -65,6 +66,8 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     spec, cloud = load_scene(summary["scene"])
     camera = PinholeCamera()
     openings = OpeningTracker()   # the image phase of the mission's tracking: its centroid_used
+    # openings' edges read as the flight read them (flights before 2026-12-06 kept the detector's masks)
+    edges = EdgeConfig() if summary.get("edges") == "photo" else None
     heading = summary.get("heading_rad")   # absent from runs before 2026-12-05: placed along the camera's yaw
     if recording is not None:
         recording.scene(spec, cloud)
@@ -83,7 +86,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
         blind = decisions.get(step, {}).get("past_the_end", False)
         p = perceive(prev, rgb, frames[step - 1]["attitude_est"], frames[step]["attitude_est"], camera.K,
                      backend, detect_blind if blind else detect, baseline_m=moved,
-                     min_baseline_m=MissionConfig().min_baseline_m)
+                     min_baseline_m=MissionConfig().min_baseline_m, edges=edges)
         seen = candidates_in(p.detection, camera.K, frames[step]["attitude_est"], heading)
         used = openings.observe(seen, (0.0, 0.0), None, float(camera.K[0, 0]), camera.width,
                                 camera.height).target_px
