@@ -61,19 +61,21 @@ def _surface_depths(mask: np.ndarray, rho: np.ndarray, measurable: np.ndarray,
 
 
 def prediction_costs(first_rgb: np.ndarray, second_rgb: np.ndarray, rhos, g: tuple[np.ndarray, np.ndarray],
-                     rotational: np.ndarray, window_px: int = 1) -> np.ndarray:
+                     rotational: np.ndarray, window_px: int = 1,
+                     box: tuple[slice, slice] | None = None) -> np.ndarray:
     """levels×H×W: how far (sum of |colour difference| over the channels, and over ``window_px``²) the second
-    frame, sampled where each inverse depth in ``rhos`` puts each first-frame pixel, is from the first frame."""
-    h, w = first_rgb.shape[:2]
-    xs, ys = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    base_x, base_y = xs + rotational[..., 0], ys + rotational[..., 1]
-    first = first_rgb.astype(np.float32)
+    frame, sampled where each inverse depth in ``rhos`` puts each first-frame pixel, is from the first frame.
+    ``box`` (rows, columns): only those pixels (the result is the box's size)."""
+    rows, cols = box or (slice(0, first_rgb.shape[0]), slice(0, first_rgb.shape[1]))
+    ys, xs = np.mgrid[rows, cols].astype(np.float32)
+    base_x, base_y = xs + rotational[rows, cols, 0], ys + rotational[rows, cols, 1]
+    g_x, g_y = g[0][rows, cols].astype(np.float32), g[1][rows, cols].astype(np.float32)
+    first = first_rgb[rows, cols].astype(np.float32)
     costs = []
     for rho in rhos:
-        warped = cv2.remap(second_rgb, base_x + (rho * g[0]).astype(np.float32),
-                           base_y + (rho * g[1]).astype(np.float32), cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_REPLICATE)
-        diff = np.abs(first - warped.astype(np.float32)).reshape(h, w, -1).sum(-1)
+        warped = cv2.remap(second_rgb, base_x + np.float32(rho) * g_x, base_y + np.float32(rho) * g_y,
+                           cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        diff = np.abs(first - warped.astype(np.float32)).reshape(first.shape[0], first.shape[1], -1).sum(-1)
         costs.append(cv2.boxFilter(diff, -1, (window_px, window_px)) if window_px > 1 else diff)
     return np.stack(costs)
 
@@ -90,17 +92,21 @@ def refine_mask(mask: np.ndarray, first_rgb: np.ndarray, second_rgb: np.ndarray,
     depths = _surface_depths(mask, rho, measurable, config)
     if depths is None:
         return mask
-    rhos = np.linspace(depths[0], depths[1], max(2, config.levels))
-    costs = prediction_costs(first_rgb, second_rgb, rhos, g, rotational, config.window_px)
-    half = len(rhos) // 2
-    far_cost, near_cost = costs[:half].min(0), costs[len(rhos) - half:].min(0)
     m8 = mask.astype(np.uint8)
     core = cv2.erode(m8, np.ones((3, 3), np.uint8), iterations=config.band_px).astype(bool)
     band = _within(mask, config.band_px) & ~core
-    out = mask.copy()
-    out[band & (far_cost < near_cost)] = True
+    rows, cols = np.nonzero(band)
+    reach = config.window_px // 2       # the window's pixels around the band's
+    box = (slice(max(0, rows.min() - reach), rows.max() + reach + 1),
+           slice(max(0, cols.min() - reach), cols.max() + reach + 1))
+    rhos = np.linspace(depths[0], depths[1], max(2, config.levels))
+    costs = prediction_costs(first_rgb, second_rgb, rhos, g, rotational, config.window_px, box)
+    half = len(rhos) // 2
+    far_cost, near_cost = costs[:half].min(0), costs[len(rhos) - half:].min(0)
+    out, tested = mask.copy(), band[box]
+    out[box][tested & (far_cost < near_cost)] = True
     if config.shrink:
-        out[band & (near_cost < far_cost)] = False
+        out[box][tested & (near_cost < far_cost)] = False
     count, labels = cv2.connectedComponents(out.astype(np.uint8))
     held = np.unique(labels[core & out])
     held = held[held > 0]
