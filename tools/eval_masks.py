@@ -38,8 +38,9 @@ log = logging.getLogger("flowgap.eval_masks")
 
 DEFAULT_BACKENDS = ("dis:fast", "dis:medium", "dis:fine", "farneback", "groundtruth", "raft")
 DEFAULT_DETECTORS = ("paper", "parallax", "parallax_known")
-# ... and on request "parallax_end": the parallax detector with ParallaxGapConfig.past_the_end on (off as flown)
-DETECTORS = (*DEFAULT_DETECTORS, "parallax_end")
+# ... and on request "parallax_end": the parallax detector with ParallaxGapConfig.past_the_end on (off as flown),
+# and "parallax_edges": its openings' edges read again from the two frames, as the companion flies (companion.edges)
+DETECTORS = (*DEFAULT_DETECTORS, "parallax_end", "parallax_edges")
 GOALS = {"dis_median_iou": 0.85, "dis_detection_rate": 0.95, "best_median_iou": 0.90, "best_min_scene_iou": 0.75}
 
 
@@ -118,10 +119,17 @@ def camera_translation(camera, pose1, pose2) -> tuple[float, float, float]:
     return tuple(float(v) for v in (r1 @ c2 + t1))
 
 
-def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2):
+def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2, frames=None):
+    """``frames``: the pair's two RGB images, which "parallax_edges" reads the edges from."""
     from companion.gap import CameraMotion, ParallaxGapConfig, detect_gap_parallax
     from companion.gap_paper import detect_gap
 
+    if name == "parallax_edges":
+        from companion.edges import refine_detection
+
+        found = run_detector("parallax", flow, camera, pose1, pose2)
+        level = np.zeros((*flow.shape[:2], 2), np.float32)      # the viewpoints are level: no rotation's flow
+        return refine_detection(found, frames[0], frames[1], flow, level, camera.K)
     if name == "paper":
         return detect_gap(flow)
     if name in ("parallax", "parallax_end"):
@@ -300,7 +308,7 @@ def evaluate_scene(scene, views_of, backends: dict, backend_specs, detectors, *,
                 tiles = [label(r1.rgb, f"{name} {vp.name}"), label(flow_to_colour(flow), bname)]
             for dname in detectors:
                 t0 = time.perf_counter()
-                det = run_detector(dname, flow, camera, pose1, pose2)
+                det = run_detector(dname, flow, camera, pose1, pose2, (r1.rgb, r2.rgb))
                 det_ms = 1e3 * (time.perf_counter() - t0)
                 err = (None if det.centroid is None or truth_c is None
                        else float(np.hypot(det.centroid[0] - truth_c[0], det.centroid[1] - truth_c[1])))
@@ -362,7 +370,8 @@ def main(argv: list[str] | None = None) -> int:
                              "a backend that cannot be built (e.g. RAFT without weights) is skipped and reported")
     parser.add_argument("--detectors", nargs="*", default=list(DEFAULT_DETECTORS),
                         help="gap detectors (default: %(default)s; 'parallax_end': the parallax detector looking "
-                             "past the wall's end too, ParallaxGapConfig.past_the_end)")
+                             "past the wall's end too, ParallaxGapConfig.past_the_end; 'parallax_edges': its "
+                             "openings' edges read again from the two frames, as the companion flies)")
     parser.add_argument("--raft-weights", type=Path, default=None, help="RAFT weights file (default: backend's)")
     parser.add_argument("--raft-iters", type=int, default=None,
                         help="RAFT iterations (default: the weights file's own setting)")
