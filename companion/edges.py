@@ -96,9 +96,10 @@ def refine_mask(mask: np.ndarray, first_rgb: np.ndarray, second_rgb: np.ndarray,
     core = cv2.erode(m8, np.ones((3, 3), np.uint8), iterations=config.band_px).astype(bool)
     band = _within(mask, config.band_px) & ~core
     rows, cols = np.nonzero(band)
-    reach = config.window_px // 2       # the window's pixels around the band's
-    box = (slice(max(0, rows.min() - reach), rows.max() + reach + 1),
-           slice(max(0, cols.min() - reach), cols.max() + reach + 1))
+    reach = config.window_px // 2       # the window's pixels around the band's, within the frame
+    h, w = mask.shape
+    box = (slice(max(0, rows.min() - reach), min(h, rows.max() + reach + 1)),
+           slice(max(0, cols.min() - reach), min(w, cols.max() + reach + 1)))
     rhos = np.linspace(depths[0], depths[1], max(2, config.levels))
     costs = prediction_costs(first_rgb, second_rgb, rhos, g, rotational, config.window_px, box)
     half = len(rhos) // 2

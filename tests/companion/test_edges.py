@@ -122,3 +122,17 @@ def test_a_detection_and_its_candidates_are_read_again(shrink, window_px):
     assert iou(detection.mask, truth) > 0.98 and iou(refined.mask, truth) > 0.95
     assert abs(clear_circle(refined.mask)[1] - clear_circle(truth)[1]) <= 1.1     # a pixel, and the grid's rounding
     assert refined.clear_radius_px == pytest.approx(clear_circle(refined.mask)[1])
+
+
+@pytest.mark.parametrize("window_px", [1, 3, 5])
+def test_a_mask_at_the_frames_edge_is_read_within_the_frame(window_px):
+    """The band of a mask that reaches the frame's edge ends there (flown: 7 of the suite's first 25 flights
+    stopped on a box past the frame's last row or column)."""
+    first, second, flow, truth = scene_pair()
+    rho, measurable, g = detector_inputs(flow)
+    ys, xs = np.mgrid[0:H, 0:W]
+    across, down = np.abs(ys - CENTRE[1]) <= 6, np.abs(xs - CENTRE[0]) <= 6     # bars from the hole to an edge
+    for mask in (truth | (across & (xs >= CENTRE[0])), truth | (down & (ys >= CENTRE[1])),
+                 truth | (across & (xs <= CENTRE[0]))):
+        refined = refine_mask(mask, first, second, rho, measurable, g, NO_ROTATION, EdgeConfig(window_px=window_px))
+        assert refined.shape == (H, W) and (refined >= mask).all()
