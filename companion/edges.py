@@ -8,26 +8,25 @@ expansion, inpainted, smear the wall's depth into the opening (a notch).  Once t
 opening is, what is left to decide near its edge is which of two known depths each pixel has: the far side's
 (what is seen through the opening) or the wall's.  Each hypothesis predicts where the pixel is in the second
 frame (the rotation's flow plus ρ·g, :mod:`companion.gap`), and the one whose prediction matches the second
-frame's colour wins.  No patch straddles the edge, so the decision is made a pixel at a time.
+frame's colour wins.  The decision is made pixel by pixel, its colour differences summed over a 3×3 window where a
+flow estimator's patches are 8 px and more.
 
 Tested are the pixels within ``band_px`` of the mask's edge, against ``levels`` inverse depths from the far
 side's median (inside the mask) to the wall's (in a ring around it): a pixel is far where one of the far half's
-levels predicts the second frame better than every level of the near half, near where the reverse holds.  The
-component that holds the mask's core, its holes filled, is the opening.  Pure functions of arrays.
+levels predicts the second frame better than every level of the near half, and joins the opening (with ``shrink``,
+a pixel where the reverse holds leaves it).  The component that holds the mask's core, its holes filled, is the
+opening.  Pure functions of arrays.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import logging
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from companion.gap import CameraMotion, GapDetection, ParallaxGapConfig, _from_contour, _inverse_depth, _within
-
-log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -60,6 +59,9 @@ def _surface_depths(mask: np.ndarray, rho: np.ndarray, measurable: np.ndarray,
     return (far, near) if near > far > 0 else None
 
 
+DEFAULT_EDGES = EdgeConfig()      # as flown (flowgap-companion --edges photo)
+
+
 def prediction_costs(first_rgb: np.ndarray, second_rgb: np.ndarray, rhos, g: tuple[np.ndarray, np.ndarray],
                      rotational: np.ndarray, window_px: int = 1,
                      box: tuple[slice, slice] | None = None) -> np.ndarray:
@@ -82,7 +84,7 @@ def prediction_costs(first_rgb: np.ndarray, second_rgb: np.ndarray, rhos, g: tup
 
 def refine_mask(mask: np.ndarray, first_rgb: np.ndarray, second_rgb: np.ndarray, rho: np.ndarray,
                 measurable: np.ndarray, g: tuple[np.ndarray, np.ndarray], rotational: np.ndarray,
-                config: EdgeConfig = EdgeConfig()) -> np.ndarray:
+                config: EdgeConfig = DEFAULT_EDGES) -> np.ndarray:
     """``mask`` with the pixels within ``band_px`` of its edge decided again by the photometric test (module
     docstring).  ``rho``, ``measurable`` and ``g``: the detector's inverse depth, where it was measured, and the
     flow of unit inverse depth (:func:`companion.gap._inverse_depth`) for the derotated flow; ``rotational``: the
@@ -108,7 +110,7 @@ def refine_mask(mask: np.ndarray, first_rgb: np.ndarray, second_rgb: np.ndarray,
     out[box][tested & (far_cost < near_cost)] = True
     if config.shrink:
         out[box][tested & (near_cost < far_cost)] = False
-    count, labels = cv2.connectedComponents(out.astype(np.uint8))
+    _, labels = cv2.connectedComponents(out.astype(np.uint8))
     held = np.unique(labels[core & out])
     held = held[held > 0]
     if held.size == 0:           # the band reaches the middle of a small mask: nothing to hold on to
@@ -121,16 +123,17 @@ def refine_mask(mask: np.ndarray, first_rgb: np.ndarray, second_rgb: np.ndarray,
 
 
 def refine_detection(detection: GapDetection, first_rgb: np.ndarray, second_rgb: np.ndarray, flow: np.ndarray,
-                     rotational: np.ndarray, K: np.ndarray, config: EdgeConfig = EdgeConfig(),
-                     parallax: ParallaxGapConfig = ParallaxGapConfig()) -> GapDetection:
+                     rotational: np.ndarray, K: np.ndarray, config: EdgeConfig = DEFAULT_EDGES,
+                     parallax: ParallaxGapConfig | None = None) -> GapDetection:
     """``detection`` with each opening's mask (:func:`refine_mask`) and what is derived from it (contour,
-    centroid, clear circle) read again; ``flow``: the derotated flow the detector saw."""
+    centroid, clear circle) read again; ``flow``: the derotated flow the detector saw; ``parallax``: the
+    detector's constants (default: as flown)."""
     if not detection.found:
         return detection
     h, w = flow.shape[:2]
     # the principal point in the detector's pixel grid (integer pixel centres), K's in the renderer's (+0.5)
     motion = CameraMotion(focal_px=float(K[0, 0]), principal_point=(float(K[0, 2]) - 0.5, float(K[1, 2]) - 0.5))
-    rho, measurable, g = _inverse_depth(flow, motion, parallax)
+    rho, measurable, g = _inverse_depth(flow, motion, parallax or ParallaxGapConfig())
     refined = []
     for candidate in detection.candidates or (detection,):
         mask = refine_mask(candidate.mask, first_rgb, second_rgb, rho, measurable & (rho > 0), g, rotational, config)

@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from companion.camera import CameraError, FrameSource
-from companion.edges import EdgeConfig
+from companion.edges import DEFAULT_EDGES, EdgeConfig
 from companion.flightrecord import FlightRecord
 from companion.link.base import AutopilotLink, LinkError, LinkLost
 from companion.look import across_heading, along_heading, next_look_step, see_frame
@@ -48,7 +48,7 @@ class Mission:
                  servo: ServoConfig | None = None, config: MissionConfig | None = None,
                  tracker: CentroidFilter | None = None, derotate_flow: bool = True,
                  openings: OpeningConfig | None = None, recording=None, blind_detector=None,
-                 edges: EdgeConfig | None = EdgeConfig()):
+                 edges: EdgeConfig | None = DEFAULT_EDGES):
         self.link = link
         self.camera = camera
         self.flow = flow

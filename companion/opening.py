@@ -185,10 +185,11 @@ class OpeningTracker:
         too small and 11 of 46 impassable ones judged to fit; the stretch and 2 px give 1.016, 0.950-1.091, 7 and 9
         (1.75 px: 1.006, 8 and 8; flown on hard seeds 67 and 68, 1.75 px lost two passable flights more than 2 px).
         With the edges read again from the frames (:mod:`companion.edges`), 1 px: on renders drawn as ``python -m
-        tools.size_error`` draws them (80 scenes of five pairs each, seeds 9100 and 9200, openings within 0.05 m of the need, the 0.007 m
-        allowance), the judgement over the truth has a spread (sd of its log) of 0.044 and 0.049 against 0.088 and
-        0.084 for the detector's masks at 2 px, with the median level (0.974 and 0.972 against 0.974 and 0.984); 1 of
-        72 impassable openings was judged to fit and 25 of 83 passable ones too small, against 3 and 28."""
+        tools.size_error`` draws them (80 scenes of five pairs each, seeds 9100 and 9200, openings within 0.05 m of
+        the need, the 0.007 m allowance), the judgement over the truth has a spread (sd of its log) of 0.044 and
+        0.049 against 0.088 and 0.084 for the detector's masks at 2 px, with the median level (0.974 and 0.972
+        against 0.974 and 0.984); 1 of 72 impassable openings was judged to fit and 25 of 83 passable ones too
+        small, against 3 and 28."""
         return (radius_px + self.config.mask_inset_px) * (wall_distance_m + self.servo.wall_thickness_m) / focal_px
 
     def observe(self, candidates: list[Candidate], across_m: Point, wall_distance_m: float | None,

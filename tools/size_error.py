@@ -154,8 +154,8 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     """One scene's pairs (rows) and judgement; ([], None) where the draw cannot be scaled into the band."""
     import cv2
 
-    from companion.gap import CameraMotion, ParallaxGapConfig, clear_circle, detect_gap_parallax
     from companion.edges import EdgeConfig, refine_detection
+    from companion.gap import CameraMotion, ParallaxGapConfig, clear_circle, detect_gap_parallax
     from companion.motion import body_to_world_from_euler, rotational_flow
     from companion.opening import OpeningTracker, in_wall, turned_wall_stretch
     from companion.servo import TURN_NEGLIGIBLE_RAD, ServoConfig
