@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from companion.clock import LockstepError
-from companion.edges import EdgeConfig
+from companion.edges import EDGE_MODES, edges_for
 from companion.flow.registry import DEFAULT_FLOW
 from companion.gap import blind_detector, get_detector
 from companion.link import BACKENDS, LinkError, make_link, parse_endpoint
@@ -52,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--raft-weights", type=Path, help="RAFT weights file (default: the shipped ones)")
     p.add_argument("--detector", choices=["parallax", "paper"], default="parallax",
                    help="gap detector: ours (parallax) or the paper's colour/Canny pipeline (default %(default)s)")
-    p.add_argument("--edges", choices=["photo", "flow"], default="photo",
+    p.add_argument("--edges", choices=EDGE_MODES, default="photo",
                    help="how an opening's edge is read: photo (default) decides the pixels near the detector's edge "
                         "again by which of the two depths predicts the next frame's colour (companion.edges); flow "
                         "keeps the detector's mask as the flow shows it (blurred by a pixel or more, the behaviour "
@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     mission = Mission(link, camera, flow, detector, runlog,
                       config=MissionConfig(altitude_m=args.altitude, finish=args.finish,
                                            perception_latency_s=args.latency), recording=recording,
-                      blind_detector=blind, edges=EdgeConfig() if args.edges == "photo" else None)
+                      blind_detector=blind, edges=edges_for(args.edges))
     signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops us with SIGTERM: end like Ctrl-C
     try:
         result = mission.run()

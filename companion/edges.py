@@ -60,6 +60,13 @@ def _surface_depths(mask: np.ndarray, rho: np.ndarray, measurable: np.ndarray,
 
 
 DEFAULT_EDGES = EdgeConfig()      # as flown (flowgap-companion --edges photo)
+EDGE_MODES = ("photo", "flow")    # --edges: read again from the frames, or the detector's masks as flow shows them
+
+
+def edges_for(mode: str | None) -> EdgeConfig | None:
+    """The edge reading ``--edges MODE`` flies with: photo reads them again (:data:`DEFAULT_EDGES`); flow, or a run
+    from before the option (None), keeps the detector's masks (None)."""
+    return DEFAULT_EDGES if mode == "photo" else None
 
 
 def prediction_costs(first_rgb: np.ndarray, second_rgb: np.ndarray, rhos, g: tuple[np.ndarray, np.ndarray],

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from companion.edges import EDGE_MODES
 from companion.flow.registry import DEFAULT_FLOW
 from scenes.capture import CaptureSpec
 from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
@@ -301,7 +302,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--flow", default=DEFAULT_FLOW,
                    help="companion flow backend (default %(default)s: the shipped RAFT; dis:fine for OpenCV DIS)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"])
-    p.add_argument("--edges", default="photo", choices=["photo", "flow"],
+    p.add_argument("--edges", default="photo", choices=EDGE_MODES,
                    help="how the companion reads an opening's edge: photo (default), decided again from the two "
                         "frames; flow, the detector's mask as the flow shows it (before 2026-12-06)")
     p.add_argument("-o", "--out", type=Path, default=Path("runs/eval_flights"),

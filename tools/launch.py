@@ -22,6 +22,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+from companion.edges import EDGE_MODES
 from companion.flow.registry import DEFAULT_FLOW
 from sitl_vehicle.__main__ import triple_arg
 from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
@@ -329,7 +330,7 @@ def _main(argv: list[str] | None) -> int:
     p.add_argument("--flow", default=DEFAULT_FLOW,
                    help="companion flow backend (default %(default)s: the shipped RAFT; dis:fine for OpenCV DIS)")
     p.add_argument("--detector", default="parallax", choices=["parallax", "paper"], help="gap detector")
-    p.add_argument("--edges", default="photo", choices=["photo", "flow"],
+    p.add_argument("--edges", default="photo", choices=EDGE_MODES,
                    help="how the companion reads an opening's edge: photo (default), decided again from the two "
                         "frames; flow, the detector's mask as the flow shows it (before 2026-12-06)")
     p.add_argument("--link", default="pymavlink", choices=["pymavlink", "mavsdk"], help="companion link backend")

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import logging
 import math
@@ -154,10 +155,10 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     """One scene's pairs (rows) and judgement; ([], None) where the draw cannot be scaled into the band."""
     import cv2
 
-    from companion.edges import EdgeConfig, refine_detection
+    from companion.edges import edges_for
     from companion.gap import CameraMotion, ParallaxGapConfig, clear_circle, detect_gap_parallax
-    from companion.motion import body_to_world_from_euler, rotational_flow
     from companion.opening import OpeningTracker, in_wall, turned_wall_stretch
+    from companion.perception import perceive
     from companion.servo import TURN_NEGLIGIBLE_RAD, ServoConfig
     from scenes import load_scene, render_splats
     from scenes.groundtruth import corridor_clearance
@@ -181,6 +182,7 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     centre = clear_centre_yz(spec.openings[0])
     spec, cloud = load_scene(spec)
     focal = float(camera.K[0, 0])
+    detector = functools.partial(detect_gap_parallax, config=ParallaxGapConfig(), motion=CameraMotion(focal_px=focal))
     turn = math.radians(spec.start_yaw_deg)
     rows = []
     for _ in range(args.pairs):
@@ -191,12 +193,8 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
         pose1, att1 = approach_pose(spec, centre, near, tuple(across + rng.normal(0.0, 0.01, 2)),
                                     tuple(rng.normal(0.0, 0.01, 2)))
         first, second = render_splats(cloud, camera, pose0), render_splats(cloud, camera, pose1)
-        h, w = first.rgb.shape[:2]
-        rotational = rotational_flow(camera.K, body_to_world_from_euler(*att0), body_to_world_from_euler(*att1), h, w)
-        flow = backend.estimate(first.rgb, second.rgb) - rotational
-        detection = detect_gap_parallax(flow, ParallaxGapConfig(), CameraMotion(focal_px=focal))
-        if args.edges == "photo":
-            detection = refine_detection(detection, first.rgb, second.rgb, flow, rotational, camera.K, EdgeConfig())
+        detection = perceive(first.rgb, second.rgb, att0, att1, camera.K, backend, detector,
+                             edges=edges_for(args.edges)).detection
         truth = gt_mask(cloud, camera, pose0, first)
         n_labels, labels = cv2.connectedComponents(truth.astype(np.uint8))
         truth_px = max((clear_circle(labels == k)[1] for k in range(1, n_labels)), default=0.0)
@@ -218,6 +216,7 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
 def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
+    from companion.edges import EDGE_MODES
     from companion.flow.base import FlowError
     from companion.flow.registry import DEFAULT_FLOW, make_flow_backend
     from scenes import PinholeCamera
@@ -232,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--distance", type=float, nargs=2, default=(0.75, 1.45), metavar=("NEAR", "FAR"),
                         help="the second frame's distance from the wall (metres); the first is a step further")
     parser.add_argument("--flow", default=DEFAULT_FLOW, help="flow backend, as flowgap-companion --flow")
-    parser.add_argument("--edges", choices=["photo", "flow"], default="photo",
+    parser.add_argument("--edges", choices=EDGE_MODES, default="photo",
                         help="openings' edges read again from the frames, as flown (photo), or the detector's masks")
     parser.add_argument("--turned", type=float, default=3.0, metavar="DEG",
                         help="walls turned more than this count as turned in the summary")

@@ -39,7 +39,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
            recording=None) -> dict:
     """Replay ``run_dir``; ``flow``/``detector`` default to what the flight used; ``recording``: a
     :class:`companion.recording.FlightRecording` to log the replay into."""
-    from companion.edges import EdgeConfig
+    from companion.edges import edges_for
     from companion.flow.colour import flow_to_colour
     from companion.flow.registry import make_flow_backend, parse_backend
     from companion.gap import blind_detector, get_detector
@@ -67,7 +67,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     camera = PinholeCamera()
     openings = OpeningTracker()   # the image phase of the mission's tracking: its centroid_used
     # openings' edges read as the flight read them (flights before 2026-12-06 kept the detector's masks)
-    edges = EdgeConfig() if summary.get("edges") == "photo" else None
+    edges = edges_for(summary.get("edges"))
     heading = summary.get("heading_rad")   # absent from runs before 2026-12-05: placed along the camera's yaw
     if recording is not None:
         recording.scene(spec, cloud)
