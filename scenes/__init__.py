@@ -11,12 +11,13 @@ Stable interfaces (other packages rely on these):
 * ``scenes.library.SUITE`` -- the 16 suite names ``window{1..4}_{brick,granite,newspaper,stone}``;
   ``scenes.library.DEFAULT_SCENE`` = ``"window1_brick"``.
 * ``scenes.load_scene(name_or_path) -> (SceneSpec, GaussianCloud)`` -- builds and caches on demand
-  under ``cache/scenes/`` (override with ``$FLOWGAP_SCENE_CACHE``); for a capture scene ``.json``
+  under ``cache/scenes/`` (override with ``$FLOWGAP_SCENE_CACHE``; kept within ``$FLOWGAP_SCENE_CACHE_MB``,
+  least recently used scenes first, by ``scenes.cache``); for a capture scene ``.json``
   (``scenes.capture``: a third-party 3DGS ``.ply`` placed in NED) ``(CaptureSpec, GaussianCloud in NED)``.
   Both specs have ``start_ned`` and ``start_yaw_deg``.
 * ``scenes.random_scene(rng: numpy.random.Generator) -> SceneSpec`` -- random training/Monte-Carlo
   scene; ``scenes.build.build_scene(spec) -> GaussianCloud`` builds it in memory (~0.2 s, no disk),
-  ``load_scene(spec)`` also caches it on disk (~15 MB).
+  ``load_scene(spec)`` also caches it on disk (~18 MB).
 * ``scenes.camera.PinholeCamera(width=320, height=240, vfov_rad=radians(75), mount=CameraMount())``,
   ``scenes.camera.Pose(position, quat_wxyz)``, ``camera.world_to_camera(pose) -> (R, t)``,
   ``camera.project(points, pose)``.

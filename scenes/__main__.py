@@ -5,6 +5,7 @@
     flowgap-scenes render window1_brick --pose 1.0 0.2 -1.5 --rpy 0 0 5 -o frame.png
     flowgap-scenes info cache/scenes/window1_brick.ply
     flowgap-scenes montage -o docs/images/suite_montage.png
+    flowgap-scenes cache                         # how much the cache holds; --prune to its limit, --clear all
     flowgap-scenes place room.ply --scale-from 0:0:0,1.2:0:0,3.5 -o room.capture.json   # draft a capture scene
     flowgap-scenes render room.capture.json --pose 1 0 -1.5 --rpy 0 0 30                # a view of it in NED
     flowgap-scenes info room.capture.json                                                # its gate, start, field
@@ -86,6 +87,31 @@ def cmd_build(args) -> int:
         n = read_ply_header(path)[0]
         state = f"built in {time.perf_counter() - t0:.1f} s" if built else "up to date"
         tqdm.write(f"{spec.name}: {n:,} Gaussians, {state} -> {path}")
+    return 0
+
+
+def _scenes(n: int) -> str:
+    return f"{n} scene" + ("" if n == 1 else "s")
+
+
+def cmd_cache(args) -> int:
+    from scenes import cache as scene_cache
+    from scenes.build import default_cache_dir
+
+    root = args.cache_dir or default_cache_dir()
+    limit = scene_cache.limit_bytes()
+    if args.clear:
+        removed = scene_cache.prune(root, 0, recent_s=0.0)
+    elif args.prune:
+        removed = scene_cache.prune(root, limit)
+    else:
+        removed = []
+    listed = scene_cache.entries(root)
+    limit_text = "no limit" if limit is None else f"limit {limit / 1e6:,.0f} MB"
+    if removed:
+        print(f"removed {_scenes(len(removed))} ({sum(e.bytes for e in removed) / 1e6:,.0f} MB)")
+    print(f"{root}: {_scenes(len(listed))}, {sum(e.bytes for e in listed) / 1e6:,.0f} MB "
+          f"({limit_text}, ${scene_cache.LIMIT_ENV})")
     return 0
 
 
@@ -236,6 +262,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_camera_args(p, 200, 150)
     cache_arg(p)
     p.set_defaults(func=cmd_montage)
+
+    p = sub.add_parser("cache", help="how much the scene cache holds; prune it to its limit or clear it",
+                       description="Built scenes stay in the cache until it passes $FLOWGAP_SCENE_CACHE_MB (default "
+                                   "5000 MB; 0 for no limit); each build then removes the least recently used "
+                                   "scenes, sparing any used in the last 15 minutes. Without options, this says "
+                                   "how many scenes and MB the cache holds.")
+    what = p.add_mutually_exclusive_group()
+    what.add_argument("--prune", action="store_true", help="remove least recently used scenes beyond the limit now")
+    what.add_argument("--clear", action="store_true", help="remove every built scene (they rebuild on demand)")
+    cache_arg(p)
+    p.set_defaults(func=cmd_cache)
     return parser
 
 

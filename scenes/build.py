@@ -22,6 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from scenes import cache as scene_cache
 from scenes import textures
 from scenes.camera import matrix_to_quat
 from scenes.capture import CaptureSpec, capture_cloud, is_capture_file, load_capture
@@ -217,14 +218,26 @@ def cache_paths(spec: SceneSpec, cache_dir: Path | None = None) -> tuple[Path, P
 
 def is_cached(spec: SceneSpec, cache_dir: Path | None = None) -> bool:
     ply, js, key = cache_paths(spec, cache_dir)
-    return ply.exists() and js.exists() and key.exists() and key.read_text().strip() == cache_key(spec)
+    return ply.exists() and js.exists() and _read_key(key) == cache_key(spec)
+
+
+def _read_key(key: Path) -> str | None:
+    try:                    # another process may remove it between a check and the read (scenes.cache.prune)
+        return key.read_text().strip()
+    except FileNotFoundError:
+        return None
 
 
 def build_cached(spec: SceneSpec, cache_dir: Path | None = None, force: bool = False) -> tuple[Path, bool]:
-    """Build ``spec`` into the cache unless it is up to date; returns (ply path, whether it was built)."""
+    """Build ``spec`` into the cache unless it is up to date; returns (ply path, whether it was built).
+
+    A hit marks the scene as used; a build then removes least recently used scenes beyond the cache's limit
+    (:mod:`scenes.cache`, ``$FLOWGAP_SCENE_CACHE_MB``)."""
     ply, js, key = cache_paths(spec, cache_dir)
     if not force and is_cached(spec, cache_dir):
+        scene_cache.touch(key)
         return ply, False
+    max_bytes = scene_cache.limit_bytes()          # a bad limit is reported before the build, not after it
     cloud = build_scene(spec)
     ply.parent.mkdir(parents=True, exist_ok=True)
     tmp = ply.with_name(ply.name + f".tmp{os.getpid()}")
@@ -233,6 +246,7 @@ def build_cached(spec: SceneSpec, cache_dir: Path | None = None, force: bool = F
     os.replace(tmp, ply)
     spec.save(js)
     key.write_text(cache_key(spec) + "\n")
+    scene_cache.prune(ply.parent, max_bytes, keep=(spec.name,))
     return ply, True
 
 
