@@ -13,6 +13,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v10 import common as mav1
 from pymavlink.dialects.v20 import common as mav2
 
+from companion.edges import DEFAULT_EDGES
 from tools.tlog import analyse_tlog, main, write_outputs
 from tools.tlog.framing import crc_x25, decode_columns, load_dialect, scan_tlog
 
@@ -566,3 +567,35 @@ def test_replay_uses_the_detector_each_frame_was_flown_with(tmp_path, monkeypatc
     (tmp_path / "decisions.jsonl").write_text("".join(json.dumps(d) + "\n" for d in decisions))
     result = replay(tmp_path)
     assert result["steps"] == 3 and used == ["plain", "plain", "blind"]
+
+
+def test_replay_reads_the_edges_as_flown_unless_told_otherwise(tmp_path, monkeypatch):
+    """``--edges``: the flight's edge reading by default (the detector's masks for a run from before the option),
+    the one asked for otherwise; the result and its summary say which."""
+    import companion.perception as perception
+    from tools.tlog.replay import describe, replay
+
+    given = []
+    real = perception.perceive
+
+    def perceive(*args, edges=None, **kwargs):
+        given.append(edges)
+        return real(*args, edges=edges, **kwargs)
+
+    monkeypatch.setattr(perception, "perceive", perceive)
+    summary = {"scene": "window1_brick", "flow": "dis:fast", "detector": "parallax"}
+    level = [1.0, 0.0, 0.0, 0.0]
+    frames = [{"step": n, "time_s": float(n), "position_true": [1.0 + 0.2 * n, 0.0, -1.5], "attitude_true": level,
+               "position_est": [1.0 + 0.2 * n, 0.0, -1.5], "attitude_est": [0.0, 0.0, 0.0]} for n in range(2)]
+    (tmp_path / "frames.jsonl").write_text("".join(json.dumps(f) + "\n" for f in frames))
+    (tmp_path / "decisions.jsonl").write_text(json.dumps({"step": 1, "centroid_used": None}) + "\n")
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    old = replay(tmp_path)
+    (tmp_path / "summary.json").write_text(json.dumps({**summary, "edges": "photo"}))
+    flown = replay(tmp_path)
+    asked = replay(tmp_path, edges="flow")
+    assert given == [None, DEFAULT_EDGES, None]
+    assert old["flown"]["edges"] == "flow" and flown["replay"]["edges"] == "photo"
+    assert asked["flown"]["edges"] == "photo" and asked["replay"]["edges"] == "flow"
+    assert "(edges photo), replayed with dis:fast + parallax (edges flow)" in describe(asked)
+    assert flown["rows"][0]["replay_clear_radius_px"] > 10          # the suite's opening, seen from 2 m

@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+from companion.edges import EDGE_MODES
 from companion.jsonsafe import json_safe
 from tools.tlog.analysis import TRUTH_AUTO_ORDER, analyse_tlog, parse_truth_option
 
@@ -89,6 +90,8 @@ def _replay(argv: list[str]) -> int:
     p.add_argument("run_dir", type=Path, help="a companion run directory (summary.json, frames.jsonl, ...)")
     p.add_argument("--flow", help="flow backend to replay with, e.g. dis:medium (default: the flight's)")
     p.add_argument("--detector", choices=["parallax", "paper"], help="detector (default: the flight's)")
+    p.add_argument("--edges", choices=EDGE_MODES, help="photo: the openings' edges read again from the frames; "
+                   "flow: the detector's masks as they are (default: the flight's; flow for runs before the option)")
     p.add_argument("--differ-px", type=float, default=10.0, help="centroid distance that counts as a "
                    "different decision (default 10)")
     p.add_argument("-o", "--out", type=Path, help="write the replay JSON here (default RUN_DIR/replay.json)")
@@ -111,7 +114,7 @@ def _replay(argv: list[str]) -> int:
             print(f"{PROG}: error: {exc}", file=sys.stderr)
             return 2
     try:
-        result = replay(args.run_dir, args.flow, args.detector, args.differ_px, recording)
+        result = replay(args.run_dir, args.flow, args.detector, args.differ_px, recording, args.edges)
     except (ReplayError, KeyError, ValueError) as exc:
         print(f"{PROG}: error: replay: {exc}", file=sys.stderr)
         return 2

@@ -36,9 +36,9 @@ def read_jsonl(path: Path) -> list[dict]:
 
 
 def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, differ_px: float = 10.0,
-           recording=None) -> dict:
-    """Replay ``run_dir``; ``flow``/``detector`` default to what the flight used; ``recording``: a
-    :class:`companion.recording.FlightRecording` to log the replay into."""
+           recording=None, edges: str | None = None) -> dict:
+    """Replay ``run_dir``; ``flow``/``detector``/``edges`` (an ``--edges`` mode) default to what the flight used;
+    ``recording``: a :class:`companion.recording.FlightRecording` to log the replay into."""
     from companion.edges import edges_for
     from companion.flow.colour import flow_to_colour
     from companion.flow.registry import make_flow_backend, parse_backend
@@ -67,7 +67,9 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     camera = PinholeCamera()
     openings = OpeningTracker()   # the image phase of the mission's tracking: its centroid_used
     # openings' edges read as the flight read them (flights before 2026-12-06 kept the detector's masks)
-    edges = edges_for(summary.get("edges"))
+    flown_edges = summary.get("edges") or "flow"
+    edges_mode = edges or flown_edges
+    edge_config = edges_for(edges_mode)
     heading = summary.get("heading_rad")   # absent from runs before 2026-12-05: placed along the camera's yaw
     if recording is not None:
         recording.scene(spec, cloud)
@@ -86,7 +88,7 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
         blind = decisions.get(step, {}).get("past_the_end", False)
         p = perceive(prev, rgb, frames[step - 1]["attitude_est"], frames[step]["attitude_est"], camera.K,
                      backend, detect_blind if blind else detect, baseline_m=moved,
-                     min_baseline_m=MissionConfig().min_baseline_m, edges=edges)
+                     min_baseline_m=MissionConfig().min_baseline_m, edges=edge_config)
         seen = candidates_in(p.detection, camera.K, frames[step]["attitude_est"], heading)
         used = openings.observe(seen, (0.0, 0.0), None, float(camera.K[0, 0]), camera.width,
                                 camera.height).target_px
@@ -102,10 +104,12 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
                             used, f["position_true"], f["attitude_true"],
                             text=f"step {step}: replayed {used}, flown {flown}")
         rows.append({"step": step, "flown_centroid": flown, "replay_centroid": used,
-                     "replay_raw": p.detection.centroid, "distance_px": distance, "differs": differs})
+                     "replay_raw": p.detection.centroid, "distance_px": distance, "differs": differs,
+                     "replay_clear_radius_px": p.detection.clear_radius_px if p.detection.found else None})
         prev = rgb
     return {"run_dir": str(run_dir), "scene": summary["scene"], "flown": {"flow": summary["flow"],
-            "detector": summary["detector"]}, "replay": {"flow": flow_spec, "detector": detector_name},
+            "detector": summary["detector"], "edges": flown_edges},
+            "replay": {"flow": flow_spec, "detector": detector_name, "edges": edges_mode},
             "differ_px": differ_px, "steps": len(rows), "differing_steps": [r["step"] for r in rows if r["differs"]],
             "rows": rows}
 
@@ -138,10 +142,12 @@ def record_tlog(recording, tlog: Path) -> int:
 
 
 def describe(result: dict) -> str:
-    lines = [f"replay of {result['run_dir']} ({result['scene']}): flown with {result['flown']['flow']} + "
-             f"{result['flown']['detector']}, replayed with {result['replay']['flow']} + "
-             f"{result['replay']['detector']}",
-             f"{'step':>4}  {'flown centroid':>16}  {'replayed':>16}  {'Δ px':>6}"]
+    def settings(which: dict) -> str:
+        return f"{which['flow']} + {which['detector']} (edges {which.get('edges', 'flow')})"
+
+    lines = [f"replay of {result['run_dir']} ({result['scene']}): flown with {settings(result['flown'])}, "
+             f"replayed with {settings(result['replay'])}",
+             f"{'step':>4}  {'flown centroid':>16}  {'replayed':>16}  {'Δ px':>6}  {'clear r px':>10}"]
 
     def fmt(c):
         return "none" if c is None else f"({c[0]:.0f}, {c[1]:.0f})"
@@ -150,8 +156,10 @@ def describe(result: dict) -> str:
         d = r["distance_px"]
         mark = "  <- differs" if r["differs"] else ""
         dist = "-" if d is None else ("∞" if math.isinf(d) else f"{d:.1f}")
+        radius = r.get("replay_clear_radius_px")
+        radius_text = "-" if radius is None else f"{radius:.1f}"
         lines.append(f"{r['step']:>4}  {fmt(r['flown_centroid']):>16}  {fmt(r['replay_centroid']):>16}  "
-                     f"{dist:>6}{mark}")
+                     f"{dist:>6}  {radius_text:>10}{mark}")
     lines.append(f"{len(result['differing_steps'])} of {result['steps']} steps differ by more than "
                  f"{result['differ_px']:g} px")
     return "\n".join(lines)
