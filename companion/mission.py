@@ -291,6 +291,10 @@ class Mission:
                 raise Refusal(why, None, openings.alternative())
             lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))
             next_step = next_look_step(view, k, width, height, cfg, wall_prior, openings.last_accepted, lag)
+            shrunk = openings.shrunk_on_approach(sight.clear_radius_m) if next_step.push else None
+            if shrunk:
+                self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed, shrunk)
+                raise Refusal(shrunk, openings.world.used, openings.alternative())
             self.clock.sleep_until(t_frame + self.config.perception_latency_s)
             self.result.servo_steps = self._steps_before + k + 1
             self._record_step(frame, seen.flow, detection, shown, next_step, wall_distance, observed)

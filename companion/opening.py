@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.opening_geometry import edge_distance_px, in_wall, turned_wall_stretch
 from companion.servo import (
     TURN_NEGLIGIBLE_RAD,
     ServoConfig,
@@ -69,6 +70,12 @@ class OpeningConfig:
                                     # the opening (see clear_radius_m; 2 px for the detector's masks as flow
                                     # shows them, before companion.edges)
     alternative_sightings: int = 3  # another opening is worth a look of the search once this many frames placed it
+    near_size_ratio: float = 0.7    # no push on an opening whose size estimates from within decide_within_m are
+                                    # all under this fraction of the clear radius it is steered by: what shrinks
+                                    # as it is approached is a pattern on the wall (measured, 644 pushes of hard
+                                    # seeds 88, 89 and 92-96, the suite and standard seed 40: the largest near
+                                    # estimate was at least 0.91 of it on every push that went through, and 0.35
+                                    # on the one that hit a wall, blobs judged 0.44 m from 3 m and 0.16 m at 1.4 m)
     max_depth_ratio: float = 0.85   # an opening's inverse depth is at most this fraction of the wall plane's
                                     # there (servo.depth_against_wall); above it, a patch of the wall (the
                                     # frame pairs of 40 hard-world flights, seed 60, re-rendered: at most 0.75
@@ -155,6 +162,7 @@ class OpeningTracker:
         self.world = ConfirmingCentroidFilter(TrackingConfig(config.world_gate_m))
         self.radii: list[float] = []        # the tracked opening's clear radius (m), one per sighting ...
         self.close_radii: list[float] = []  # ... and those from within decide_within_m, in front of it
+        self.near_radii: list[float] = []   # ... and those from within decide_within_m, from anywhere
         self.places: list[Point] = []       # the tracked clear centre's accepted places (right, down), metres
         self.close_places = 0               # ... how many of them with the wall within decide_within_m
         self.radius_trail: list[float] = []  # the clear radius (upper quartile) after each of its estimates
@@ -325,6 +333,8 @@ class OpeningTracker:
                            and wall_distance_m <= self.config.decide_within_m and moved_m >= self.config.judge_step_m)
             if judged_here:
                 self.close_radii.append(estimate)
+            if wall_distance_m <= self.config.decide_within_m:
+                self.near_radii.append(estimate)
             self.places.append(chosen[1])
             self.close_places += wall_distance_m <= self.config.decide_within_m
         # the opening does not move: its place is the median of the latest sightings (each jitters by a few px)
@@ -347,6 +357,7 @@ class OpeningTracker:
                 self.pixels.seed(c.target_px)
                 self.world.seed(p)
                 self.radii, self.close_radii, self.places, self.radius_trail = [r], [r], [p], [r]
+                self.near_radii = [r]
                 self.close_places = 1        # judged from within decide_within_m, as every switch is
                 self.switched = True
                 target, radius, chosen = p, r, (c, p)
@@ -375,7 +386,22 @@ class OpeningTracker:
         """Drop what was kept of the tracked opening (its places, size estimates and sighting counts): what comes
         next is another opening, or a better placed one."""
         self.radii, self.close_radii, self.places, self.radius_trail = [], [], [], []
+        self.near_radii = []
         self.close_places = 0
+
+    def shrunk_on_approach(self, steered_m: float | None) -> str | None:
+        """Why the tracked opening is not one to push through, when its size estimates from within
+        ``decide_within_m`` are all under ``near_size_ratio`` of ``steered_m`` (the clear radius it is steered and
+        pushed by, set by views from farther): a real opening's estimates agree from any distance, a pattern on the
+        wall taken for one shrinks as the vehicle nears it.  None where they agree or none is near yet."""
+        if not self.near_radii or not steered_m:
+            return None
+        near = max(self.near_radii)
+        if near >= self.config.near_size_ratio * steered_m:
+            return None
+        return (f"the opening judged {2 * steered_m:.2f} m clear from farther looks {2 * near:.2f} m clear from "
+                f"within {self.config.decide_within_m:g} m of the wall: what shrinks as it is approached is no "
+                "opening (a pattern on the wall?): not flying through")
 
     def _remember(self, placed: list[tuple[Candidate, Point]], radius_m) -> None:
         """Keep the places and clear radii (``radius_m`` of a candidate) of openings other than the tracked one (each
@@ -440,61 +466,6 @@ def is_size_refusal(reason: str | None) -> bool:
     """Whether a refusal's reason is one of :meth:`OpeningTracker.describe_too_small`'s: judged too small, or too
     near the need to tell."""
     return reason is not None and any(words in reason for words in _TOO_SMALL_WORDS)
-
-
-def seen_slot_width(half_width_m: float, distance_m: float, turn_rad: float, thickness_m: float) -> float:
-    """How wide (tangent of the angle, left to right) a camera centred on it sees the way through a slot of
-    ``half_width_m`` in a wall ``thickness_m`` deep whose face is ``distance_m`` ahead on the axis and turned by
-    ``turn_rad``.  The far side is bounded by the back face's edge; the near side by the back face's edge while
-    the turn is small, then by the front face's (the back edge, shifted across by the thickness, comes out from
-    behind it)."""
-    s, c = math.sin(abs(turn_rad)), math.cos(turn_rad)
-    r, d, t = half_width_m, distance_m, thickness_m
-    far = (r * c - t * s) / (d + r * s + t * c)
-    near = min(r * c / max(d - r * s, 1e-6), (r * c + t * s) / (d - r * s + t * c))
-    return near + far
-
-
-def turned_wall_stretch(half_width_m: float, distance_m: float, turn_rad: float, thickness_m: float) -> float:
-    """The horizontal factor that takes a mask seen through a turned wall, scaled by the back face's depth
-    (:meth:`OpeningTracker.clear_radius_m`), to the slot's own width in the wall's plane, the corridor a body
-    crossing square to the face has (:mod:`companion.push` crosses a turned wall so; ``scenes.groundtruth.
-    corridor_clearance`` square to the wall), over its seen width (:func:`seen_slot_width`) at that depth.  1 for a
-    wall facing the camera; 1/cos(turn) were the wall infinitely thin.  The near side bounded by the front face,
-    nearer than the back face the scale assumes, is what 1/cos(turn) missed: on the close views of 56 hard-world
-    openings whose width bounds their clear circle (seeds 60, 64-68, ground-truth masks, true distance and
-    thickness), the clear size came out 3 % under the truth for turns under 5°, 13 % over it for 15-21°; with this
-    factor, less the thickness's t·tan(turn) (the corridor along the heading, judged until 2026-12-05), 4 % under
-    and 4 % over.  Evaluated at one ``half_width_m`` (the one the fit decision turns on): between 0.2 and 0.4 m it
-    changes by at most 4 % (a 10° turn 1.1 m away)."""
-    seen = seen_slot_width(half_width_m, distance_m, turn_rad, thickness_m) * (distance_m + thickness_m)
-    return 2.0 * half_width_m / seen
-
-
-def in_wall(mask: np.ndarray, stretch: float) -> tuple[np.ndarray, float]:
-    """``mask`` stretched horizontally by ``stretch`` (:func:`turned_wall_stretch`: as the wall's own plane
-    shows it, where a body flying along the heading crosses it) and its clear radius in those pixels."""
-    import cv2
-
-    from companion.gap import clear_circle
-
-    h, w = mask.shape
-    wide = cv2.resize(mask.astype(np.uint8), (max(1, round(w * stretch)), h), interpolation=cv2.INTER_NEAREST)
-    return wide.astype(bool), clear_circle(wide)[1]
-
-
-def edge_distance_px(mask: np.ndarray, point: Point) -> float:
-    """Distance (px) from ``point`` to the nearest pixel outside ``mask`` (the frame's border counts as outside);
-    0 outside the mask."""
-    import cv2
-
-    u, v = int(round(point[0])), int(round(point[1]))
-    h, w = mask.shape
-    if not (0 <= u < w and 0 <= v < h) or not mask[v, u]:
-        return 0.0
-    m = np.zeros((h + 2, w + 2), np.uint8)
-    m[1:-1, 1:-1] = mask.astype(bool)
-    return float(cv2.distanceTransform(m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[v + 1, u + 1])
 
 
 def _nearest(items, reference: Point | None, gate: float, key):

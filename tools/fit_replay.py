@@ -71,7 +71,8 @@ def flights(run: Path) -> list[dict]:
 def rescaled(decision: dict, judging, flown, focal_px: float) -> float:
     """A logged frame's size estimate (m), scaled by the :class:`companion.opening.OpeningTracker` ``flown``, scaled
     again as ``judging`` (another wall thickness) scales it (see the module)."""
-    from companion.opening import TURN_NEGLIGIBLE_RAD, turned_wall_stretch
+    from companion.opening import TURN_NEGLIGIBLE_RAD
+    from companion.opening_geometry import turned_wall_stretch
 
     estimate, pixels = decision["estimate_m"], decision["estimate_px"]
     flown_t, judging_t = flown.servo.wall_thickness_m, judging.servo.wall_thickness_m

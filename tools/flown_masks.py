@@ -90,7 +90,7 @@ def score_pair(cloud, spec, camera, first: dict, second: dict, backend, configs:
 
     from companion.gap import CameraMotion, clear_circle, detect_gap_parallax
     from companion.motion import derotate, off_heading, tilted_pixel
-    from companion.opening import edge_distance_px
+    from companion.opening_geometry import edge_distance_px
     from scenes import Pose, render_splats
     from tools.eval_masks import gt_mask
 

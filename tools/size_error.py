@@ -157,7 +157,8 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
 
     from companion.edges import edges_for
     from companion.gap import CameraMotion, ParallaxGapConfig, clear_circle, detect_gap_parallax
-    from companion.opening import OpeningTracker, in_wall, turned_wall_stretch
+    from companion.opening import OpeningTracker
+    from companion.opening_geometry import in_wall, turned_wall_stretch
     from companion.perception import perceive
     from companion.servo import TURN_NEGLIGIBLE_RAD, ServoConfig
     from scenes import load_scene, render_splats

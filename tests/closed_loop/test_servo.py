@@ -287,7 +287,7 @@ def test_wall_readings_agree_when_the_latest_lie_within_a_tolerance_that_grows_w
 
 
 def test_an_opening_seen_at_an_angle_is_judged_at_its_width_in_the_wall():
-    from companion.opening import in_wall
+    from companion.opening_geometry import in_wall
 
     mask = np.zeros((240, 320), bool)
     mask[60:180, 120:180] = True                    # 60 px wide seen at 30°: 69 px in the wall's plane

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from companion.gap import _from_contour
-from companion.opening import Candidate, OpeningTracker, edge_distance_px, is_size_refusal
+from companion.opening import Candidate, OpeningTracker, is_size_refusal
+from companion.opening_geometry import edge_distance_px
 from companion.servo import ServoConfig
 
 W, H, F = 320, 240, 156.4
@@ -343,6 +344,56 @@ def test_only_size_estimates_from_in_front_of_it_near_the_wall_judge_it():
     assert tracker.observe([], (-offset, 0.0), 1.4, F, W, H, moved_m=0.2).estimate_m is None
 
 
+
+ASIDE_M = 0.2       # the openings below lie this far right of the vehicle: not in front of it, never judged
+
+
+def _aside(half_px, distance):
+    u = 160 + (ASIDE_M * F / distance if distance else 0.0)
+    return rect(round(u - half_px), 120 - half_px, round(u + half_px), 120 + half_px)
+
+
+def _approach(tracker, halves_and_distances):
+    for _ in range(2):
+        tracker.observe([cand(_aside(halves_and_distances[0][0], None))], (0.0, 0.0), None, F, W, H)
+    return [tracker.observe([cand(_aside(half, d))], (0.0, 0.0), d, F, W, H, moved_m=0.2)
+            for half, d in halves_and_distances]
+
+
+def test_what_shrinks_as_it_is_approached_is_not_pushed_through():
+    """A pattern on the wall taken for an opening: judged about 0.6 m clear from 2-3 m, 0.15 m from 1.4 m, seen from
+    0.2 m aside (measured, hard world seed 95, hard_0072240404: 0.44 m from 3.4 m, 0.16 m at 1.4 m, pushed 0.22 m
+    off its centre into the wall)."""
+    cfg = OpeningTracker().config
+    tracker = OpeningTracker()
+    far = _approach(tracker, [(40, 2.8), (35, 2.6), (40, 2.2)])
+    assert far[-1].clear_radius_m > 0.5
+    assert tracker.shrunk_on_approach(far[-1].clear_radius_m) is None        # nothing near yet
+    near = tracker.observe([cand(_aside(6, 1.4))], (0.0, 0.0), 1.4, F, W, H, moved_m=0.2)
+    assert near.judged_estimates == 0 and near.clear_radius_m > 0.5           # steered by the far views still
+    why = tracker.shrunk_on_approach(near.clear_radius_m)
+    assert why is not None and f"{2 * near.clear_radius_m:.2f} m clear from farther" in why
+    assert f"{2 * near.estimate_m:.2f} m clear from within {cfg.decide_within_m:g} m" in why
+    assert why.endswith("not flying through")
+
+
+def test_an_opening_the_same_size_from_near_and_far_is_pushed_through():
+    """Its estimates agree from any distance (the mask grows as the wall nears): no refusal, and none either when the
+    nearest estimate is a notched mask within near_size_ratio of the rest."""
+    tracker = OpeningTracker()
+    scale = tracker.servo.wall_thickness_m
+
+    def half(distance, metres=0.35):
+        return round(metres * F / (distance + scale))
+
+    seen = _approach(tracker, [(half(d), d) for d in (2.8, 2.4, 2.0, 1.5, 1.2)])
+    assert all(tracker.shrunk_on_approach(s.clear_radius_m) is None for s in seen) and seen[-1].clear_radius_m > 0.3
+    notched = tracker.observe([cand(_aside(half(1.0, 0.35 * 0.75), 1.0))], (0.0, 0.0), 1.0, F, W, H, moved_m=0.2)
+    assert tracker.shrunk_on_approach(notched.clear_radius_m) is None
+    # forgotten with the opening: a jump to another place starts its near estimates afresh
+    tracker._forget_history()
+    assert tracker.near_radii == [] and tracker.shrunk_on_approach(0.5) is None
+
 # --- an opening in a turned wall: the corridor a body flying along the heading has ----------------------------
 
 def _ray_cast_width(half_width, distance, turn, thickness):
@@ -365,7 +416,7 @@ def _ray_cast_width(half_width, distance, turn, thickness):
 
 @pytest.mark.parametrize("turn_deg", [0.0, -4.0, 9.0, 14.0, -20.0])
 def test_a_slot_in_a_turned_wall_is_seen_as_wide_as_ray_casting_says(turn_deg):
-    from companion.opening import seen_slot_width
+    from companion.opening_geometry import seen_slot_width
 
     turn = np.radians(turn_deg)
     for half_width, distance, thickness in [(0.24, 1.1, 0.15), (0.3, 1.5, 0.25), (0.2, 0.9, 0.1)]:
@@ -376,7 +427,7 @@ def test_a_slot_in_a_turned_wall_is_seen_as_wide_as_ray_casting_says(turn_deg):
 def test_the_turned_wall_stretch_gives_the_slots_own_width_the_corridor_square_to_the_face():
     import math
 
-    from companion.opening import seen_slot_width, turned_wall_stretch
+    from companion.opening_geometry import seen_slot_width, turned_wall_stretch
 
     assert turned_wall_stretch(0.24, 1.1, 0.0, 0.15) == pytest.approx(1.0)       # a wall facing the camera
     for turn_deg in (5.0, 12.0, -18.0):
@@ -396,7 +447,7 @@ def test_a_rendered_slot_in_a_turned_wall_is_judged_as_one_in_a_wall_facing_the_
     narrows, it came out 11 % higher)."""
     import math
 
-    from companion.opening import in_wall, turned_wall_stretch
+    from companion.opening_geometry import in_wall, turned_wall_stretch
     from scenes.build import build_scene
     from scenes.camera import PinholeCamera, Pose
     from scenes.groundtruth import corridor_clearance, gap_mask_from_labels

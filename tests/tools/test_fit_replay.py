@@ -7,7 +7,8 @@ import math
 
 import pytest
 
-from companion.opening import OpeningConfig, turned_wall_stretch
+from companion.opening import OpeningConfig
+from companion.opening_geometry import turned_wall_stretch
 from companion.servo import ServoConfig
 from scenes import PinholeCamera
 from tools import fit_replay
