@@ -75,7 +75,7 @@ class OpeningConfig:
                                     # as it is approached is a pattern on the wall (measured, 644 pushes of hard
                                     # seeds 88, 89 and 92-96, the suite and standard seed 40: the largest near
                                     # estimate was at least 0.91 of it on every push that went through, and 0.35
-                                    # on the one that hit a wall, blobs judged 0.44 m from 3 m and 0.16 m at 1.4 m)
+                                    # on the one that hit a wall, blobs judged 0.44 m from 3.4 m and 0.16 m at 1.4 m)
     max_depth_ratio: float = 0.85   # an opening's inverse depth is at most this fraction of the wall plane's
                                     # there (servo.depth_against_wall); above it, a patch of the wall (the
                                     # frame pairs of 40 hard-world flights, seed 60, re-rendered: at most 0.75

@@ -26,16 +26,16 @@ def seen_slot_width(half_width_m: float, distance_m: float, turn_rad: float, thi
 
 def turned_wall_stretch(half_width_m: float, distance_m: float, turn_rad: float, thickness_m: float) -> float:
     """The horizontal factor that takes a mask seen through a turned wall, scaled by the back face's depth
-    (:meth:`OpeningTracker.clear_radius_m`), to the slot's own width in the wall's plane, the corridor a body
-    crossing square to the face has (:mod:`companion.push` crosses a turned wall so; ``scenes.groundtruth.
-    corridor_clearance`` square to the wall), over its seen width (:func:`seen_slot_width`) at that depth.  1 for a
-    wall facing the camera; 1/cos(turn) were the wall infinitely thin.  The near side bounded by the front face,
-    nearer than the back face the scale assumes, is what 1/cos(turn) missed: on the close views of 56 hard-world
-    openings whose width bounds their clear circle (seeds 60, 64-68, ground-truth masks, true distance and
-    thickness), the clear size came out 3 % under the truth for turns under 5°, 13 % over it for 15-21°; with this
-    factor, less the thickness's t·tan(turn) (the corridor along the heading, judged until 2026-12-05), 4 % under
-    and 4 % over.  Evaluated at one ``half_width_m`` (the one the fit decision turns on): between 0.2 and 0.4 m it
-    changes by at most 4 % (a 10° turn 1.1 m away)."""
+    (:meth:`companion.opening.OpeningTracker.clear_radius_m`), to the slot's own width in the wall's plane, the
+    corridor a body crossing square to the face has (:mod:`companion.push` crosses a turned wall so;
+    ``scenes.groundtruth.corridor_clearance`` square to the wall), over its seen width (:func:`seen_slot_width`) at
+    that depth. 1 for a wall facing the camera; 1/cos(turn) were the wall infinitely thin. The near side bounded by
+    the front face, nearer than the back face the scale assumes, is what 1/cos(turn) missed: on the close views of
+    56 hard-world openings whose width bounds their clear circle (seeds 60, 64-68, ground-truth masks, true distance
+    and thickness), the clear size came out 3 % under the truth for turns under 5°, 13 % over it for 15-21°; with
+    this factor, less the thickness's t·tan(turn) (the corridor along the heading, judged until 2026-12-05), 4 %
+    under and 4 % over. Evaluated at one ``half_width_m`` (the one the fit decision turns on): between 0.2 and 0.4 m
+    it changes by at most 4 % (a 10° turn 1.1 m away)."""
     seen = seen_slot_width(half_width_m, distance_m, turn_rad, thickness_m) * (distance_m + thickness_m)
     return 2.0 * half_width_m / seen
 
