@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import os
 import time
 from pathlib import Path
@@ -44,7 +45,7 @@ def limit_bytes(env: dict[str, str] | None = None) -> int | None:
         mb = float(raw)
     except ValueError:
         mb = float("nan")
-    if not mb >= 0:
+    if not (math.isfinite(mb) and mb >= 0):
         raise SpecError(f"${LIMIT_ENV}={raw!r} is not a size in MB; set a number such as 5000, or 0 for no limit")
     return None if mb == 0 else int(mb * 1_000_000)
 

@@ -63,7 +63,7 @@ def test_limit_reads_megabytes_from_the_environment_and_refuses_nonsense():
     assert scene_cache.limit_bytes({}) == scene_cache.DEFAULT_LIMIT_MB * 1_000_000
     assert scene_cache.limit_bytes({scene_cache.LIMIT_ENV: "250"}) == 250_000_000
     assert scene_cache.limit_bytes({scene_cache.LIMIT_ENV: "0"}) is None
-    for bad in ("lots", "-5", "nan"):
+    for bad in ("lots", "-5", "nan", "inf"):
         with pytest.raises(SpecError, match="FLOWGAP_SCENE_CACHE_MB"):
             scene_cache.limit_bytes({scene_cache.LIMIT_ENV: bad})
 
