@@ -39,3 +39,18 @@ def test_the_mask_panel_marks_the_gap_and_an_empty_flight_still_renders():
     assert render([], ["no frames"]).shape[0] > 0
     assert step_text(3, None, (0.2, 0.0, 0.0), None, "servo") == \
         "step 3  error none  step sent (0.20, +0.00, +0.00) m  wall -  servo"
+
+
+def test_the_storyboard_png_is_compressed_and_reads_back_pixel_for_pixel(tmp_path):
+    """A sweep keeps one storyboard per flight: written with zlib level 3, a smooth textured board is smaller than
+    OpenCV's default PNG settings make it, and PNG stays lossless."""
+    import cv2
+
+    yy, xx = np.mgrid[0:240, 0:320]
+    smooth = np.stack([(xx * 0.8) % 255, (yy * 1.1) % 255, ((xx + yy) * 0.5) % 255], -1).astype(np.uint8)
+    row = StoryRow(1, smooth, smooth[::-1].copy(), np.zeros((240, 320), bool), None, None, "step 1")
+    img = render([row] * 6, ["DONE"])
+    save(img, tmp_path / "board.png")
+    cv2.imwrite(str(tmp_path / "default.png"), np.ascontiguousarray(img[:, :, ::-1]))
+    assert (tmp_path / "board.png").stat().st_size < 0.8 * (tmp_path / "default.png").stat().st_size
+    assert np.array_equal(cv2.imread(str(tmp_path / "board.png"))[:, :, ::-1], img)
