@@ -236,8 +236,8 @@ def test_refused_it_looks_again_from_either_side_of_the_start_before_holding(tmp
 
 def test_refused_with_another_opening_seen_it_looks_in_front_of_that_one_first(tmp_path):
     """Refused with another opening seen on the way (Refusal.alternative), the search's first look is in front of
-    that one (only openings within search_reach_m of it, the refused one set aside), and its second from the side
-    of the start's axis further from it: as many looks as without one."""
+    that one (only openings within search_reach_m of it, the refused one set aside), its second from the side
+    of the start's axis further from it, and its third from the other side (1.1 m from the other opening)."""
     from companion.mission import Refusal
 
     link = RecordingLink()
@@ -256,13 +256,14 @@ def test_refused_with_another_opening_seen_it_looks_in_front_of_that_one_first(t
     mission._servo = servo
     with pytest.raises(Refusal) as refused:
         mission._servo_searching((0.0, 0.0, -1.5))
-    assert len(looks) == 3
+    assert len(looks) == 4
     reach = MissionConfig().search_reach_m
-    assert [r for _, _, r in looks[1:]] == [(0.4, reach), (-1.5, reach)]
+    assert [r for _, _, r in looks[1:]] == [(0.4, reach), (-1.5, reach), (1.5, reach)]
     assert looks[1][1] == ((-0.7, -0.2),)              # the refused one set aside
     assert looks[1][0][1] == pytest.approx(0.4)        # the look starts in front of it (east 0.4 m)
     assert str(refused.value) == ("too small; looked again from in front of another opening seen on the way, "
-                                  "0.4 m right of the start: look 2; from 1.5 m left of the start: look 3")
+                                  "0.4 m right of the start: look 2; from 1.5 m left of the start: look 3; "
+                                  "from 1.5 m right of the start: look 4")
 
 
 def test_a_vehicle_that_disarmed_on_the_ground_before_takeoff_got_through_is_armed_again(tmp_path):
@@ -416,15 +417,19 @@ def test_the_first_look_never_pushes_an_opening_it_never_placed(tmp_path):
     _look_by_the_image(tmp_path, HalfTheFrame(), match="no opening placed within 30 steps", first=True)
 
 
-def test_the_looks_are_either_side_of_the_axis_or_in_front_of_another_opening_and_the_side_further_from_it():
+def test_the_looks_are_either_side_of_the_axis_or_in_front_of_another_opening_then_both_sides_further_first():
     """companion.search.look_places: the refused opening's side first, then the other; with another opening seen,
-    in front of it first, then whichever side is further from it (never a third look)."""
+    in front of it first, then whichever side is further from it, then the nearer side unless it lies within
+    half the shift of the other opening (that look covered it)."""
     from companion.search import look_places
 
     assert look_places(0.2, 1.5, -1.0) == [(-1.3, "1.5 m left of the start"), (1.7, "1.5 m right of the start")]
     assert look_places(0.2, 1.5, -1.0, 0.6) == [(0.6, "in front of another opening seen on the way, 0.4 m right of "
-                                                      "the start"), (-1.3, "1.5 m left of the start")]
-    assert [r for r, _ in look_places(0.0, 1.5, 1.0, -2.4)] == [-2.4, 1.5]
+                                                      "the start"), (-1.3, "1.5 m left of the start"),
+                                                (1.7, "1.5 m right of the start")]
+    assert [r for r, _ in look_places(0.0, 1.5, 1.0, -2.4)] == [-2.4, 1.5, -1.5]
+    assert [r for r, _ in look_places(0.0, 1.5, 1.0, -1.2)] == [-1.2, 1.5]     # -1.5 is 0.3 m from it
+    assert [r for r, _ in look_places(0.0, 1.5, 1.0, -0.7)] == [-0.7, 1.5, -1.5]
 
 
 def test_a_look_steering_by_the_image_alone_keeps_off_the_wall_earlier_looks_placed(tmp_path):
