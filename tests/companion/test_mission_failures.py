@@ -529,6 +529,30 @@ def test_a_looks_own_agreeing_readings_are_the_wall_wherever_earlier_looks_allow
     assert jumping <= prior - hold + ServoConfig().forward_step_m
 
 
+def test_a_look_that_never_read_the_wall_leaves_the_next_look_only_the_earlier_looks_bound(tmp_path):
+    """What a look saw of the wall bounds the next look (``Mission._wall_seen``); a look that read nothing of it
+    (zero flow, nothing detected) and went by the bound earlier looks put on it adds no sight: taken as one, it was
+    allowed the search's 25° turn a second time across the next look's way (measured, hard world seed 96: a third
+    look held 3 m from the wall).  A look that measured the wall leaves that."""
+    from companion.gap import _no_gap
+    from companion.mission import Refusal
+
+    def look(flow, detector, prior):
+        link = RecordingLink()
+        link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)
+        mission = Mission(link, StillCamera(), flow(link), detector, RunLog(tmp_path / str(prior), images=False),
+                          config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01, min_baseline_m=0.0))
+        mission.yaw = 0.0
+        with pytest.raises(Refusal) as refused:
+            mission._servo((0.0, 0.0, -1.5), (), prior, (0.0, 1.2))
+        return mission._wall_seen, str(refused.value)
+
+    seen, why = look(lambda link: ZeroFlow(), lambda flow: _no_gap(flow.shape[:2], "nothing", "fake"), 2.0)
+    assert seen is None and "the bound earlier looks put on it" in why
+    seen, _ = look(lambda link: WallFlow(link, 3.0), SmallHole(), 2.9)
+    assert seen is not None and seen[0] == pytest.approx(3.0, abs=0.15)
+
+
 class LowHole:
     """A detector that sees an opening low in the frame (about 0.4 of the half-height below the centre) in its
     first ``frames`` calls, and nothing after them (``frames`` None: in every call)."""
