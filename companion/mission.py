@@ -144,7 +144,8 @@ class Mission:
         """Servo on an opening; refused, look again from either side of the start's axis (``search_shift_m``,
         the refused opening's side first), the refused ones set aside; returns what :meth:`_servo` returns, or
         raises the combined refusal.  With another opening seen on the way (``Refusal.alternative``), the first
-        look is in front of it instead, and the second from the side of the axis further from it."""
+        look is in front of it instead, then the sides of the axis, the one further from it first
+        (:func:`companion.search.look_places`)."""
         try:
             return self._servo(start)
         except Refusal as exc:
