@@ -76,6 +76,9 @@ class OpeningConfig:
                                     # seeds 88, 89 and 92-96, the suite and standard seed 40: the largest near
                                     # estimate was at least 0.91 of it on every push that went through, and 0.35
                                     # on the one that hit a wall, blobs judged 0.44 m from 3.4 m and 0.16 m at 1.4 m)
+    near_estimates: int = 2         # ... once this many near estimates say so; with fewer, one more frame first
+                                    # (measured, the suite, window2_newspaper: one notched mask, 14 px for 28-32 px
+                                    # in the frames before, refused an opening 0.79 m clear; 2026-12-06, AVX512-BF16)
     max_depth_ratio: float = 0.85   # an opening's inverse depth is at most this fraction of the wall plane's
                                     # there (servo.depth_against_wall); above it, a patch of the wall (the
                                     # frame pairs of 40 hard-world flights, seed 60, re-rendered: at most 0.75
@@ -389,19 +392,29 @@ class OpeningTracker:
         self.near_radii = []
         self.close_places = 0
 
+    def _shrunk(self, steered_m: float | None) -> bool:
+        """Whether every size estimate from within ``decide_within_m`` is under ``near_size_ratio`` of
+        ``steered_m``; False with none."""
+        return bool(self.near_radii) and bool(steered_m) and (
+            max(self.near_radii) < self.config.near_size_ratio * steered_m)
+
     def shrunk_on_approach(self, steered_m: float | None) -> str | None:
         """Why the tracked opening is not one to push through, when its size estimates from within
-        ``decide_within_m`` are all under ``near_size_ratio`` of ``steered_m`` (the clear radius it is steered and
-        pushed by, set by views from farther): a real opening's estimates agree from any distance, a pattern on the
-        wall taken for one shrinks as the vehicle nears it.  None where they agree or none is near yet."""
-        if not self.near_radii or not steered_m:
+        ``decide_within_m``, ``near_estimates`` of them at least, are all under ``near_size_ratio`` of ``steered_m``
+        (the clear radius it is steered and pushed by, set by views from farther): a real opening's estimates agree
+        from any distance, a pattern on the wall taken for one shrinks as the vehicle nears it.  None where they
+        agree, or fewer are there (see :meth:`doubted_on_approach`)."""
+        if not self._shrunk(steered_m) or len(self.near_radii) < self.config.near_estimates:
             return None
         near = max(self.near_radii)
-        if near >= self.config.near_size_ratio * steered_m:
-            return None
         return (f"the opening judged {2 * steered_m:.2f} m clear from farther looks {2 * near:.2f} m clear from "
                 f"within {self.config.decide_within_m:g} m of the wall: what shrinks as it is approached is no "
                 "opening (a pattern on the wall?): not flying through")
+
+    def doubted_on_approach(self, steered_m: float | None) -> bool:
+        """Whether the near estimates say it shrank but are too few to refuse it by: no push yet, one more frame
+        (a single notched mask is not a pattern on the wall)."""
+        return self._shrunk(steered_m) and len(self.near_radii) < self.config.near_estimates
 
     def _remember(self, placed: list[tuple[Candidate, Point]], radius_m) -> None:
         """Keep the places and clear radii (``radius_m`` of a candidate) of openings other than the tracked one (each
