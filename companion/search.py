@@ -44,9 +44,9 @@ def look_places(axis: float, shift: float, side: float, alternative: float | Non
     -1 left: the refused opening's side) of the start's ``axis``, then to the other side; with ``alternative``
     (where another opening the first look placed is across the heading), first in front of it, then the one of
     the two sides further from it, then the nearer one too, unless it lies within half of ``shift`` of the
-    alternative (that look saw it).  Measured, hard world seed 96, hard_0274582567: refused at 0.2 m left, the
-    alternative (0.4 m left, 0.40 m clear) refused, then 1.5 m right: nothing; the 0.85 m opening 2.5 m left was
-    never looked at.  A third look costs a refused flight some 20 s of its 300 (the longest hard-world flights
+    alternative (that look saw it).  Measured, hard world seed 96, hard_0274582567: a 0.45 m opening 0.2 m left
+    refused, then the alternative 0.4 m left (judged 0.44 m), then 1.5 m right: nothing; the 0.85 m opening 2.5 m
+    left was never looked at.  A third look costs a refused flight some 20 s of its 300 (the longest hard-world flights
     of seed 96 took 78 s)."""
     places = [(axis + s * shift, f"{shift:.1f} m {'right' if s > 0 else 'left'} of the start") for s in (side, -side)]
     if alternative is None:
