@@ -281,6 +281,8 @@ def _parser() -> argparse.ArgumentParser:
                                        "--random 1000 --starts 1 --seed 8 -o runs/r1000 (add --resume after a stop)")
     p.add_argument("scenes", nargs="*", help="scene names or spec paths (default: the 16-scene suite, "
                                              "unless --random is given)")
+    p.add_argument("--scenes", nargs="+", dest="more_scenes", default=[], metavar="SCENE",
+                   help="more scene names or spec paths, as flowgap-eval-masks takes them (added to the above)")
     p.add_argument("--random", type=int, default=0, metavar="N",
                    help="also fly N random scenes drawn from --seed (specs saved under OUT/scenes)")
     p.add_argument("--world", choices=("standard", "hard"), default="standard",
@@ -357,7 +359,7 @@ def _main(argv: list[str] | None) -> int:
             require_ray()
         except RaySetupError as exc:
             return _fail(str(exc))
-    scenes = list(args.scenes) or ([] if args.random else list(SUITE))
+    scenes = list(args.scenes) + list(args.more_scenes) or ([] if args.random else list(SUITE))
     try:
         scenes += random_scene_files(args.random, args.seed, args.out / "scenes", args.world)
         specs = {s: resolve_spec(s) for s in scenes}

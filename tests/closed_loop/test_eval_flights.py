@@ -53,6 +53,9 @@ def test_bad_arguments_are_one_line_errors(tmp_path, capsys):
     assert main(["no_such_scene", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and all(line.startswith("flowgap-eval-flights: error:") for line in err)
+    # --scenes, as flowgap-eval-masks takes them, names scenes too
+    assert main(["--scenes", "no_such_scene", "--out", str(tmp_path)]) == 2
+    assert "no_such_scene" in capsys.readouterr().err
 
 
 def test_two_sweeps_on_one_machine_never_share_an_instance():
