@@ -35,6 +35,7 @@ from companion.servo import (
     ServoConfig,
     ServoStep,
     heading_to_ned,
+    probe_aside_m,
     servo_step,
 )
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
@@ -298,8 +299,7 @@ class Mission:
             next_step = next_look_step(view, k, width, height, cfg, wall_prior, openings.last_accepted, lag)
             if next_step.push and openings.doubted_on_approach(sight.clear_radius_m):
                 # one near estimate says it shrank: no push on it, a step aside for another frame pair to judge by
-                next_step = dataclasses.replace(next_step, push=False, delta_heading=(
-                    0.0, self.servo.probe_step_m if k % 2 == 0 else -self.servo.probe_step_m, 0.0))
+                next_step = dataclasses.replace(next_step, push=False, delta_heading=(0.0, probe_aside_m(k, cfg), 0.0))
             shrunk = openings.shrunk_on_approach(sight.clear_radius_m) if next_step.push else None
             if shrunk:
                 self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed, shrunk)

@@ -147,6 +147,12 @@ def servo_step(centroid: tuple[float, float] | None, area_frac: float, step_inde
     return ServoStep((forward, dy, dz), (e_u, e_v), close, push)
 
 
+def probe_aside_m(step_index: int, config: ServoConfig = ServoConfig()) -> float:
+    """A step sideways (right, metres) for a frame pair with parallax where the vehicle would stay in place: right
+    and left in turn by ``step_index``, so that the next step returns."""
+    return config.probe_step_m if step_index % 2 == 0 else -config.probe_step_m
+
+
 def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m: float, area_frac: float,
                 step_index: int, config: ServoConfig = ServoConfig(),
                 error: tuple[float, float] | None = None, clearance_here_m: float | None = None,
@@ -208,7 +214,7 @@ def metric_step(offset_m: tuple[float, float], clear_radius_m: float, distance_m
         # turn, and the next step returns.  Not back: moving along the axis puts a centred opening at the focus
         # of expansion, where the flow shows no depth (measured, hard world seed 43: probing back and forth 0.9 m
         # from a turned wall, a vehicle centred on an opening never saw it clear again)
-        dy = config.probe_step_m if step_index % 2 == 0 else -config.probe_step_m
+        dy = probe_aside_m(step_index, config)
     push = aligned and (fresh or roomy) and placed and (large or budget_spent)
     if push:        # the push starts from where the frame was taken (companion.mission), its bias from there
         dy, dz = correction(offset_m)
