@@ -340,7 +340,7 @@ def test_ardupilot_copter_mavlink1_guided(tmp_path):
 
 
 def test_latest_before_ties_follow_file_order():
-    from tools.tlog.analysis import latest_before
+    from tools.tlog.truth import latest_before
 
     t_sp, i_sp = np.array([10, 20, 20, 30]), np.array([0, 2, 5, 7])
     t_pos, i_pos = np.array([5, 20, 20, 25, 40]), np.array([1, 3, 6, 4, 9])

@@ -11,7 +11,8 @@ from pathlib import Path
 
 from companion.edges import EDGE_MODES
 from companion.jsonsafe import json_safe
-from tools.tlog.analysis import TRUTH_AUTO_ORDER, analyse_tlog, parse_truth_option
+from tools.tlog.analysis import analyse_tlog
+from tools.tlog.truth import TRUTH_AUTO_ORDER, parse_truth_option
 
 PROG = "flowgap-tlog"
 EPILOG = f"""\
