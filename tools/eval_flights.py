@@ -291,8 +291,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--starts", type=int, default=3, help="randomised starts per scene (default 3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start draws and the vehicles' noise")
     p.add_argument("--jobs", type=int, default=2,
-                   help="flights at once on this machine (default 2); with --ray local, the local Ray gets "
-                        "JOBS x --cpus-per-flight CPUs; on a cluster, the cluster's CPUs decide")
+                   help="flights at once on this machine (default 2), each flight's processes held to their share "
+                        "of its CPUs (a thread each per library on 2 CPUs; an OMP_NUM_THREADS or NUMBA_NUM_THREADS "
+                        "you set is kept); with --ray local, the local Ray gets JOBS x --cpus-per-flight CPUs; on a "
+                        "cluster, the cluster's CPUs decide")
     p.add_argument("--realtime", action="store_true",
                    help="pace each flight by the wall clock at --speed instead of lockstep (a flight's outcome then "
                         "depends on this machine's load)")
@@ -314,7 +316,8 @@ def _parser() -> argparse.ArgumentParser:
                         "other settings must be those the saved flights were flown with")
     add_ray_argument(p, "flight")
     p.add_argument("--cpus-per-flight", type=float, default=2.0, metavar="N",
-                   help="with --ray: the CPUs each flight's task declares (default 2: vehicle and companion)")
+                   help="with --ray: the CPUs each flight's task declares (default 2: vehicle and companion), and on a "
+                        "cluster the threads per library its processes may use")
     add_link_fault_arguments(p)
     return p
 
@@ -384,6 +387,7 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
     from tools.ray_sweep import RaySetupError, ray_session
     from tools.sweep_executors import FlightFailed, FlightJob, FlightSettings, LocalFlights, RayFlights
     from tools.sweep_results import ResumeError, SweepInterrupted, run_sweep
+    from tools.threads import flight_threads
 
     labels = {s: specs[s].name for s in scenes}      # spec paths are reported by their scene's name
     # a capture's gate is taken as passable: its author says the vehicle fits through it
@@ -394,8 +398,10 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
             for scene in scenes for i in range(args.starts)]
     if len({job.key for job in jobs}) < len(jobs):
         return _fail("two scenes share a name; give each scene once")
+    # this machine's share for each of --jobs flights (--ray local runs on it too); a cluster task's, its CPUs
+    threads = flight_threads(args.jobs) if args.ray in (None, "local") else max(1, int(args.cpus_per_flight))
     settings = FlightSettings(flow=args.flow, detector=args.detector, edges=args.edges, lockstep=not args.realtime,
-                              speed=args.speed, latency_s=args.latency)
+                              speed=args.speed, latency_s=args.latency, threads=threads)
 
     def make_row(job: FlightJob, verdict: dict) -> dict:
         row = {**verdict, "scene": job.label, "start_index": job.start_index, "seed": job.flight["seed"]}
@@ -427,7 +433,7 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
     summary.update(world=args.world, flow=args.flow, detector=args.detector, edges=args.edges,
                    clock="realtime" if args.realtime else "lockstep",
                    speed=args.speed if args.realtime else None, latency_s=args.latency, seed=args.seed,
-                   starts_per_scene=args.starts, total_wall_s=round(wall_s, 1),
+                   starts_per_scene=args.starts, total_wall_s=round(wall_s, 1), threads_per_flight=threads,
                    link_faults=None if link_faults is None else link_faults.settings(),
                    executor=executor.name, reused=outcome.reused, flown=outcome.flown,
                    flights_per_hour=round(3600 * outcome.flown / wall_s, 1) if outcome.flown and wall_s else None,

@@ -14,6 +14,7 @@ import collections
 import contextlib
 import json
 import logging
+import os
 import signal
 import subprocess
 import sys
@@ -26,6 +27,7 @@ from companion.edges import EDGE_MODES
 from companion.flow.registry import DEFAULT_FLOW
 from sitl_vehicle.__main__ import triple_arg
 from tools.link_faults import LinkFaultError, LinkFaults, add_link_fault_arguments, link_faults_from_args
+from tools.threads import thread_env
 
 
 def _wind(text: str) -> tuple[float, ...]:
@@ -36,7 +38,6 @@ def _wind(text: str) -> tuple[float, ...]:
     return (config.mean_mps, config.gust_mps) + (() if config.from_deg is None else (config.from_deg,))
 
 log = logging.getLogger("flowgap-sitl")
-
 
 def _pump(stream, prefix: str, sink, tail: collections.deque) -> None:
     for line in iter(stream.readline, ""):
@@ -93,13 +94,15 @@ def flights_stopped_by_signals() -> Iterator[None]:
         _terminating.clear()
 
 
-def _start(cmd: list[str], prefix: str, sink) -> subprocess.Popen:
+def _start(cmd: list[str], prefix: str, sink, env: dict[str, str] | None = None) -> subprocess.Popen:
     """The process, its output streamed to ``sink`` (None: not shown) and its last lines kept in ``proc.tail``
-    (read after ``proc.pump`` has finished) for an error that has to say why it died."""
+    (read after ``proc.pump`` has finished) for an error that has to say why it died; ``env``: its environment
+    (None: this process's)."""
     with _running_lock:
         if _terminating.is_set():
             raise Terminated()
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1)
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, bufsize=1,
+                                env=env)
         _running.add(proc)
     proc.tail = collections.deque(maxlen=5)
     proc.pump = threading.Thread(target=_pump, args=(proc.stdout, prefix, sink, proc.tail), daemon=True)
@@ -135,7 +138,8 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
            link: str = "pymavlink", lockstep: bool = False, latency_s: float = 0.0,
            wind: tuple[float, ...] | None = None, yaw_deg: float | None = None,
            camera_delay_s: float = 0.0, rerun: bool = False, rerun_connect: str | None = None,
-           link_faults: LinkFaults | None = None, signing_key: Path | None = None, edges: str = "photo") -> dict:
+           link_faults: LinkFaults | None = None, signing_key: Path | None = None, edges: str = "photo",
+           threads: int | None = None) -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json).
 
     ``scene``: a suite name, spec ``.json`` or capture scene ``.json``; ``start`` (NED, on the ground), ``yaw_deg``
@@ -147,7 +151,8 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
     exposure each camera frame reaches the companion; ``rerun``: the companion records the flight in
     ``run_dir/flight.rrd`` (``rerun_connect``: streams it to a running viewer instead); ``link_faults``: relay
     the API link through seeded faults (a seed of None: ``seed``'s), recorded in the verdict's ``link_faults``;
-    ``signing_key``: a PX4 key file both processes sign with (the vehicle then drops unsigned messages).
+    ``signing_key``: a PX4 key file both processes sign with (the vehicle then drops unsigned messages);
+    ``threads``: the threads each library of both processes may use (:func:`thread_env`; None: as many as cores).
     ``timeout_s``: in real time, the wall seconds after which the flight is stopped; in lockstep, the simulated
     seconds after which the vehicle stops itself, so that the outcome never depends on the machine's load (a
     wall limit once cut hard-world flights short on a busy machine), and ``LOCKSTEP_HANG_S`` wall seconds bound
@@ -206,8 +211,9 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
     companion = vehicle = None
     interrupted = vehicle_ended = timed_out = False
     try:
-        companion = _start(companion_cmd, "[companion]", log_sink)
-        vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink)
+        env = None if threads is None else {**os.environ, **thread_env(threads, os.environ)}
+        companion = _start(companion_cmd, "[companion]", log_sink, env)
+        vehicle = _start(vehicle_cmd, "[vehicle]  ", log_sink, env)
         while companion.poll() is None:
             if vehicle.poll() is not None:
                 vehicle_ended = True

@@ -31,6 +31,8 @@ from datetime import datetime, timezone
 from importlib.metadata import version
 from pathlib import Path
 
+from tools.threads import thread_env
+
 log = logging.getLogger(__name__)
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -111,8 +113,7 @@ def run_target(target: str, build: Path, max_children: int) -> dict:
     start = time.monotonic()
     # mutmut forks a child per mutant: numba's GNU OpenMP layer kills a forked child with SIGTERM (mutmut's
     # 'suspicious'), so use its fork-safe workqueue layer, and one thread per library
-    env = dict(os.environ, NUMBA_THREADING_LAYER="workqueue", OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="1",
-               MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    env = dict(os.environ, NUMBA_THREADING_LAYER="workqueue", **thread_env(1))
     run = subprocess.run(cmd, cwd=where, capture_output=True, text=True, env=env)
     wall = time.monotonic() - start
     (where / "mutmut-run.log").write_text(run.stdout + run.stderr)

@@ -52,6 +52,7 @@ class FlightSettings:
     lockstep: bool = True
     speed: float = 2.0          # with lockstep False only
     latency_s: float = 0.0
+    threads: int | None = None  # each flight's processes' threads per library (tools.launch.thread_env); None: cores
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,7 @@ def fly(job: FlightJob, settings: FlightSettings, scene: str, run_dir: Path, ins
                          settings.detector, seed=job.flight["seed"], images=False, log_sink=None,
                          altitude=job.flight["altitude"], lockstep=settings.lockstep, latency_s=settings.latency_s,
                          wind=job.flight["wind"], camera_delay_s=job.flight["camera_delay_s"],
-                         link_faults=job.link_faults, edges=settings.edges)
+                         link_faults=job.link_faults, edges=settings.edges, threads=settings.threads)
     finally:
         ended = time.time()
         instances.release(instance)
