@@ -2,7 +2,9 @@
 two flights at once on this machine's local pool), ``eval.flights_per_hour_ray`` of the same sweep as Ray tasks on
 a local Ray sized for two flights at once (``--ray local --jobs 2``), ``eval.ray_overhead_pct`` (how much slower
 Ray flies them), and ``eval.flights_per_hour_realtime`` of the same sweep paced by the wall clock at
-``--speed 2`` (the default before lockstep); all from the same run, with ``dis:fine``.
+``--speed 2`` (the default before lockstep); all from the same run, with ``dis:fine``; and
+``eval.flights_per_hour_default_flow``, the lockstep sweep with the companion's default flow (RAFT), whose flights
+hold their libraries to a thread each on 2 CPUs (:mod:`tools.threads`).
 
 The local pool and Ray sweeps run in turns, twice each, and each keeps its better run, so that a change in the
 machine's load (other work on a 2-core machine moves a 4-flight sweep by 10-20 %) hits both alike. Flights per
@@ -23,6 +25,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from companion.flow.registry import DEFAULT_FLOW
 from tools.eval_flights import main as eval_flights
 
 log = logging.getLogger(__name__)
@@ -76,6 +79,7 @@ def run() -> dict:
     lock = max(locks, key=_per_hour)
     ray = max(rays, key=_per_hour) if rays else None
     real = _sweep(["--realtime", "--speed", "2"])
+    default = _sweep(["--flow", DEFAULT_FLOW])
     n = lock["flights"]
     what = f"flights per wall hour, {n} suite flights 2 at a time, dis:fine"
     out = {
@@ -84,6 +88,11 @@ def run() -> dict:
                                           f"runs; {lock['success']}/{n} through)"},
         "eval.flights_per_hour_realtime": {"value": round(_per_hour(real)),
                                            "unit": f"{what}, --realtime --speed 2 ({real['success']}/{n} through)"},
+        "eval.flights_per_hour_default_flow": {
+            "value": round(_per_hour(default)),
+            "unit": f"flights per wall hour, {n} suite flights 2 at a time, {DEFAULT_FLOW} (the companion's default "
+                    f"flow), lockstep, {default['threads_per_flight']} thread(s) per library a flight "
+                    f"({default['success']}/{n} through)"},
     }
     if ray is not None:
         overhead = 100 * (1 - _per_hour(ray) / _per_hour(lock))
