@@ -39,6 +39,7 @@ def _wind(text: str) -> tuple[float, ...]:
 
 log = logging.getLogger("flowgap-sitl")
 
+
 def _pump(stream, prefix: str, sink, tail: collections.deque) -> None:
     for line in iter(stream.readline, ""):
         tail.append(line.rstrip())

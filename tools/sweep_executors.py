@@ -52,7 +52,7 @@ class FlightSettings:
     lockstep: bool = True
     speed: float = 2.0          # with lockstep False only
     latency_s: float = 0.0
-    threads: int | None = None  # each flight's processes' threads per library (tools.launch.thread_env); None: cores
+    threads: int | None = None  # each flight's processes' threads per library (tools.threads); None: as many as cores
 
 
 @dataclass(frozen=True)
