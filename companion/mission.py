@@ -221,6 +221,7 @@ class Mission:
                          self.config.search_wall_agree_m, self.config.search_wall_agree_per_m, wall_ceiling)
         openings = OpeningTracker(cfg, self.openings, self.tracker, avoid, reach)
         ever_seen = False
+        unseen_in_front, stepped_back = 0, False
         # no step lower than min_altitude_m above home (or the flight's own height, if lower), whatever the image
         floor = self._home_z - min(self.config.min_altitude_m, self.config.altitude_m)
         for k in range(cfg.step_budget):
@@ -297,6 +298,16 @@ class Mission:
                 raise Refusal(why, None, openings.alternative())
             lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))
             next_step = next_look_step(view, k, width, height, cfg, wall_prior, openings.last_accepted, lag)
+            near = wall_distance is not None and wall_distance <= self.openings.decide_within_m
+            unseen_in_front = unseen_in_front + 1 if near and not found and sight.offset_m is not None else 0
+            if unseen_in_front >= self.config.unseen_step_back_after and not stepped_back and not next_step.push:
+                note = (f"no opening seen in {unseen_in_front} frames in front of the one placed "
+                        f"{math.hypot(*sight.offset_m):.2f} m off: a step {self.config.unseen_step_back_m:.1f} m "
+                        "back, to see it again")
+                log.info("%s", note)
+                self.record.event(note)
+                next_step = dataclasses.replace(next_step, delta_heading=(-self.config.unseen_step_back_m, 0.0, 0.0))
+                stepped_back, unseen_in_front = True, 0
             if next_step.push and openings.doubted_on_approach(sight.clear_radius_m):
                 # one near estimate says it shrank: no push on it, a step aside for another frame pair to judge by
                 next_step = dataclasses.replace(next_step, push=False, delta_heading=(0.0, probe_aside_m(k, cfg), 0.0))

@@ -47,6 +47,11 @@ class MissionConfig:
                            # sharpest depth step and the opening lies in its near class (measured: the first looks
                            # of four passable hard-world flights, seeds 88-90, that saw nothing in 8 frames; it
                            # found the opening in 2-4 of their frames 4-8, and nothing off it)
+    unseen_step_back_after: int = 4  # frames in a row that see no opening at all, with the tracked one placed and
+    unseen_step_back_m: float = 0.5  # the wall within decide_within_m: then one step back this far, once a look
+                                     # (a new forward baseline and a wider view; it dithered beside the place
+                                     # instead until its steps ran out: 21 of 400 flights of hard seeds 96, 98, 99
+                                     # and 101 did, for 6-27 frames; 7 of them failed)
     min_wall_measurements: int = 3  # flow-based wall distances needed before they steer the push
     min_baseline_m: float = 0.02  # a frame pair whose camera moved less than this is not looked at (no parallax:
                                   # at 1 m from a wall 1 m before its background, about 3 px of contrast)

@@ -723,3 +723,42 @@ def test_a_push_square_to_a_turned_wall_logs_the_length_it_flies_besides_its_dep
     straight, length, flown = line_of(None)
     assert flown == pytest.approx(length, abs=1e-6)
     assert straight.startswith(f"traversal: {length:.2f} m ahead along the heading in ")
+
+
+def test_a_look_that_sees_nothing_in_front_of_its_placed_opening_steps_back_once(tmp_path, monkeypatch):
+    """MissionConfig.unseen_step_back_after: frames in a row that see no opening at all, the tracked one placed and
+    the wall within decide_within_m, take the vehicle one step back (a new forward baseline, a wider view), once a
+    look; before, it dithered beside the place until its steps ran out (hard seeds 96-102)."""
+    import companion.mission as mission_module
+    from companion.look import FrameView
+    from companion.mission import Refusal
+    from companion.opening import Sight
+    from companion.servo import ServoStep
+
+    opening = HalfTheFrame()(np.zeros((48, 64, 2), np.float32))
+    views = []
+
+    def scripted_view(*_args):      # placed 1.2 m ahead; seen in the first two frames only
+        found = [opening] if len(views) < 2 else []
+        views.append(bool(found))
+        sight = Sight(opening if found else None, (47.5, 23.5), offset_m=(0.0, 0.0), clear_radius_m=0.3)
+        return FrameView(sight, opening, found, [], 1.2, 1.2, 1.2, None, 0.0, 0.0, None, 0.1)
+
+    monkeypatch.setattr(mission_module, "see_frame", scripted_view)
+    monkeypatch.setattr(mission_module, "next_look_step",
+                        lambda *_args: ServoStep((0.0, 0.0, 0.0), None, False, False, offset_m=(0.0, 0.0),
+                                                 tolerance_m=0.05))
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)
+    mission = Mission(link, StillCamera(), ZeroFlow(), HalfTheFrame(), RunLog(tmp_path, images=False),
+                      config=MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01, min_baseline_m=0.0))
+    mission.yaw = 0.0                                  # heading north: forward is the north coordinate
+    with pytest.raises(Refusal, match="could not centre"):
+        mission._servo((0.0, 0.0, -1.5))
+    north = [p[0] for p in link.setpoints]
+    steps = [round(b - a, 6) for a, b in zip(north[:-1], north[1:], strict=True)]
+    back = -mission.config.unseen_step_back_m
+    assert steps.count(back) == 1 and all(s in (0.0, back) for s in steps)
+    # sent after the sixth frame: two that saw it, then unseen_step_back_after that saw nothing
+    assert steps.index(back) == 2 + mission.config.unseen_step_back_after - 1
+    mission.record.runlog.close()
