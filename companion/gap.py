@@ -13,7 +13,9 @@ image border, inpainted elsewhere, and put on a log scale.  Repeated Otsu splits
 largest far component inside the size bounds and enclosed by a nearer surface is the mask, with the band of
 it that the wall hides in the second frame filled back (the flow there follows the wall).  With
 ``past_the_end`` (off as flown), a sharpest step with no hole beyond it has its far parts at the image's border
-set aside, as what lies past the wall's end, and the rest is split again.
+set aside, as what lies past the wall's end, and the rest is split again.  With ``against_wall`` (on), where
+no hole is found, log ρ is split again against the wall's plane fitted to it: a turned wall's far side is as
+deep as the background seen through an opening on its near side.
 
 Both detectors take an H×W×2 float flow (u right, v down, pixels) and return a frozen :class:`GapDetection`.
 """
@@ -159,6 +161,12 @@ class ParallaxGapConfig:
                                       # Flown since 2026-12-06 where a look has seen nothing for three frames
                                       # (blind_detector)
     past_the_end_reach_px: int = 3    # ... set aside with this many pixels of their blurred edge
+    against_wall: bool = True         # with no hole found so far, look again in the inverse depth against the
+                                      # wall's plane (see _holes_against_wall): a turned wall's far side lies as
+                                      # deep as the background seen through an opening on its near side
+    against_wall_band: float = 0.15   # ... where |log ρ - log ρ_plane| is at most this, the wall's plane
+    against_wall_walled: float = 0.7  # ... which this much of what is measurable must lie on, and this much of
+                                      # the measurable ring around a hole
     # Where the image has texture (textured_pixels): flow elsewhere (the empty space beyond a wall's end, a plain
     # surface) is filled in from the region's edges and says nothing of its depth.
     texture_min_gradient: float = 20.0  # grey Sobel magnitude (of 255) of a textured pixel ...
@@ -356,31 +364,102 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
     if positive.sum() < 0.5 * valid.sum():
         return _no_gap((h, w), "inverse depth mostly negative (motion not translation-like)", det)
     log_rho = np.log(np.where(positive, rho, np.nan))
-    lo, hi = np.nanpercentile(log_rho[positive], config.robust_percentiles)
-    span = max(float(hi - lo), 1e-6)
-    # 8-bit log inverse depth; pixels near the FoE (or with ρ ≤ 0) are inpainted from their neighbours.
-    img = (255 * np.clip((np.nan_to_num(log_rho, nan=lo) - lo) / span, 0, 1)).astype(np.uint8)
-    if not positive.all():
-        img = cv2.inpaint(img, (~positive).astype(np.uint8), 5, cv2.INPAINT_TELEA)
-    if config.median_ksize > 1:
-        img = cv2.medianBlur(img, config.median_ksize)
+    img, span = _log_image(log_rho, positive, config)
     fars, reason = far_regions(img, span / 255.0, config)
-    if not fars:
-        return _no_gap((h, w), reason, det)
     a_min, a_max = config.area_min_frac * h * w, config.area_max_frac * h * w
+    scored = []
     for far in (fars if config.every_step else fars[:1]):   # the sharpest step beyond which is a hole
         scored = _holes(far, config, a_min, a_max)
         if scored:
             break
     else:
-        scored = _holes_past_the_end(img, fars[0], span / 255.0, config, a_min, a_max) if config.past_the_end else []
-        if not scored:
-            return _no_gap((h, w), f"no far region with {a_min:.0f} <= area <= {a_max:.0f} px² enclosed by a "
-                                   "nearer surface", det)
+        if fars and config.past_the_end:
+            scored = _holes_past_the_end(img, fars[0], span / 255.0, config, a_min, a_max)
+    if not scored and config.against_wall:
+        scored = _holes_against_wall(log_rho, positive, motion, config, a_min, a_max)
+    if not scored:
+        return _no_gap((h, w), reason if not fars else f"no far region with {a_min:.0f} <= area <= {a_max:.0f} "
+                       "px² enclosed by a nearer surface", det)
     if config.occlusion_fill is not None:
         scored = [_fill_occluded(c, rho, positive, g, config.occlusion_fill) for c in scored]
     found = [_from_contour((h, w), cv2.approxPolyDP(c, 0.5, True), det) for c in scored]
     return dataclasses.replace(found[0], candidates=tuple(found))
+
+
+def _log_image(log_values: np.ndarray, measurable: np.ndarray, config: ParallaxGapConfig) -> tuple[np.ndarray, float]:
+    """8-bit image of a log inverse depth (or of a log ratio of inverse depths) over its robust range, and that
+    range; pixels not ``measurable`` (near the FoE, ρ ≤ 0) are inpainted from their neighbours."""
+    lo, hi = np.nanpercentile(log_values[measurable], config.robust_percentiles)
+    span = max(float(hi - lo), 1e-6)
+    img = (255 * np.clip((np.nan_to_num(log_values, nan=lo) - lo) / span, 0, 1)).astype(np.uint8)
+    if not measurable.all():
+        img = cv2.inpaint(img, (~measurable).astype(np.uint8), 5, cv2.INPAINT_TELEA)
+    if config.median_ksize > 1:
+        img = cv2.medianBlur(img, config.median_ksize)
+    return img, span
+
+
+def wall_plane_log(log_rho: np.ndarray, measurable: np.ndarray, focal_px: float, band: float,
+                   rounds: int = 4) -> np.ndarray | None:
+    """log ρ of the dominant plane in view (the wall), per pixel: on a plane ρ is linear in the image
+    coordinates, so it is fitted by least squares to the measurable pixels, first the nearer 70 % (what lies
+    beyond an opening or past the wall's end is farther), then ``rounds`` times to those within ``band`` (in log
+    ρ) of the last fit.  None when too little is measurable or the plane comes out behind the camera."""
+    h, w = log_rho.shape
+    ys, xs = np.mgrid[0:h, 0:w]
+    design = np.stack([(xs - (w - 1) / 2) / focal_px, (ys - (h - 1) / 2) / focal_px, np.ones((h, w))], -1)
+    rho = np.exp(np.where(measurable, log_rho, -np.inf))
+    keep = measurable & (log_rho >= np.nanpercentile(log_rho[measurable], 30)) if measurable.any() else measurable
+    for _ in range(rounds + 1):
+        if keep.sum() < 0.1 * h * w:
+            return None
+        coef, *_ = np.linalg.lstsq(design[keep], rho[keep], rcond=None)
+        plane = design @ coef
+        if not (plane > 0).all():
+            return None
+        keep = measurable & (np.abs(log_rho - np.log(plane)) <= band)
+    return np.log(plane)
+
+
+def _holes_against_wall(log_rho: np.ndarray, measurable: np.ndarray, motion: CameraMotion,
+                        config: ParallaxGapConfig, a_min: float, a_max: float) -> list[np.ndarray]:
+    """Holes found in the inverse depth against the wall's plane (ρ over the plane's ρ there), where the plain
+    split found none.  A wall turned against the camera spans a range of depths: its far side can lie as far as
+    what is seen through an opening on its near side, so that no one split of ρ separates them (measured:
+    hard-world walls turned 16-20° with the background 0.6-1.2 m behind, seeds 99, 101-103, the opening plain to
+    see in the flow and no hole found in most frames; six flights stalled in front of it).  Against the wall's
+    plane the wall is flat at 0, the opening below it.  Only holes clear of the image's border count: what lies
+    past the wall's end is as far below the plane, and reaches the border."""
+    h, w = log_rho.shape
+    f = motion.focal_px or (h / 2.0) / np.tan(np.radians(config.vfov_deg) / 2.0)
+    plane = wall_plane_log(log_rho, measurable, f, config.against_wall_band)
+    if plane is None:
+        return []
+    on_wall = measurable & (np.abs(log_rho - plane) <= config.against_wall_band)
+    if on_wall.sum() < config.against_wall_walled * measurable.sum():
+        return []       # no one plane in view dominates it: no wall to measure holes against
+    img, span = _log_image(log_rho - plane, measurable, config)
+    fars, _ = far_regions(img, span / 255.0, config)
+    border = np.ones((h, w), bool)
+    border[1:-1, 1:-1] = False
+    for far in fars:
+        scored = [c for c in _holes(far, config, a_min, a_max, outside=border)
+                  if _walled(c, on_wall, measurable, config)]
+        if scored:
+            return scored
+    return []
+
+
+def _walled(contour: np.ndarray, on_wall: np.ndarray, measurable: np.ndarray, config: ParallaxGapConfig,
+            ring_px: int = 4) -> bool:
+    """Whether the ring around a hole lies on the wall's plane where it is measurable (``against_wall_walled``
+    of it at least, and a third of it measurable): a hole in the wall is walled all round; a blob in the flow of
+    the empty space past the wall's end, or one that reaches it, is not."""
+    mask = np.zeros(on_wall.shape, np.uint8)
+    cv2.drawContours(mask, [contour], -1, 1, thickness=cv2.FILLED)
+    ring = _within(mask, ring_px) & ~_within(mask, 1)
+    seen = ring & measurable
+    return bool(seen.sum() >= ring.sum() / 3) and float(on_wall[seen].mean()) >= config.against_wall_walled
 
 
 def _fill_occluded(contour: np.ndarray, rho: np.ndarray, measurable: np.ndarray,
