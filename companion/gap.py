@@ -86,9 +86,15 @@ def clear_circle(mask: np.ndarray) -> tuple[tuple[float, float] | None, float]:
     return (float(xs[i]), float(ys[i])), radius
 
 
-def _from_contour(shape: tuple[int, int], contour: np.ndarray, detector: str) -> GapDetection:
-    mask = np.zeros(shape, dtype=np.uint8)
+def _filled(shape: tuple[int, int], contour: np.ndarray) -> np.ndarray:
+    """uint8 mask (0/1) of ``contour`` filled, in a frame of ``shape``."""
+    mask = np.zeros(shape, np.uint8)
     cv2.drawContours(mask, [contour], -1, 1, thickness=cv2.FILLED)
+    return mask
+
+
+def _from_contour(shape: tuple[int, int], contour: np.ndarray, detector: str) -> GapDetection:
+    mask = _filled(shape, contour)
     m = cv2.moments(contour)
     if abs(m["m00"]) > 1e-9:
         centroid = (m["m10"] / m["m00"], m["m01"] / m["m00"])
@@ -248,11 +254,16 @@ def inverse_depth_from_flow(flow: np.ndarray, motion: CameraMotion = CameraMotio
     return rho, valid
 
 
+def _focal_px(motion: CameraMotion, config: ParallaxGapConfig, height: int) -> float:
+    """The camera's focal length in pixels: the motion's, else from ``config.vfov_deg`` and the frame's height."""
+    return motion.focal_px or (height / 2.0) / np.tan(np.radians(config.vfov_deg) / 2.0)
+
+
 def _inverse_depth(flow: np.ndarray, motion: CameraMotion,
                    config: ParallaxGapConfig) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
     """:func:`inverse_depth_from_flow` and the flow field g = (g_u, g_v) of unit inverse depth (F = ρ·g)."""
     h, w = flow.shape[:2]
-    f = motion.focal_px or (h / 2.0) / np.tan(np.radians(config.vfov_deg) / 2.0)
+    f = _focal_px(motion, config, h)
     cx, cy = motion.principal_point or ((w - 1) / 2.0, (h - 1) / 2.0)
     if motion.translation is None:
         t = estimate_translation(flow, f, (cx, cy))
@@ -431,8 +442,7 @@ def _holes_against_wall(log_rho: np.ndarray, measurable: np.ndarray, motion: Cam
     plane the wall is flat at 0, the opening below it.  Only holes clear of the image's border count: what lies
     past the wall's end is as far below the plane, and reaches the border."""
     h, w = log_rho.shape
-    f = motion.focal_px or (h / 2.0) / np.tan(np.radians(config.vfov_deg) / 2.0)
-    plane = wall_plane_log(log_rho, measurable, f, config.against_wall_band)
+    plane = wall_plane_log(log_rho, measurable, _focal_px(motion, config, h), config.against_wall_band)
     if plane is None:
         return []
     on_wall = measurable & (np.abs(log_rho - plane) <= config.against_wall_band)
@@ -455,8 +465,7 @@ def _walled(contour: np.ndarray, on_wall: np.ndarray, measurable: np.ndarray, co
     """Whether the ring around a hole lies on the wall's plane where it is measurable (``against_wall_walled``
     of it at least, and a third of it measurable): a hole in the wall is walled all round; a blob in the flow of
     the empty space past the wall's end, or one that reaches it, is not."""
-    mask = np.zeros(on_wall.shape, np.uint8)
-    cv2.drawContours(mask, [contour], -1, 1, thickness=cv2.FILLED)
+    mask = _filled(on_wall.shape, contour)
     ring = _within(mask, ring_px) & ~_within(mask, 1)
     seen = ring & measurable
     return bool(seen.sum() >= ring.sum() / 3) and float(on_wall[seen].mean()) >= config.against_wall_walled
@@ -474,8 +483,7 @@ def _fill_occluded(contour: np.ndarray, rho: np.ndarray, measurable: np.ndarray,
     that band (the opening cut on the other side), so the union is the opening; moving toward it, d points
     into the opening and adds nothing.  ρ_far and ρ_near: medians inside the mask and in a ring around it."""
     h, w = rho.shape
-    mask = np.zeros((h, w), np.uint8)
-    cv2.drawContours(mask, [contour], -1, 1, thickness=cv2.FILLED)
+    mask = _filled((h, w), contour)
     inner = cv2.erode(mask, np.ones((5, 5), np.uint8)).astype(bool) & measurable
     ring = _within(mask, ring_px) & ~_within(mask, 2) & measurable
     if inner.sum() < 20 or ring.sum() < 20:
