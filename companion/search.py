@@ -23,12 +23,13 @@ def _wall_limit(sight: tuple, right: float, turn_rad: float, yaw_margin_rad: flo
 
 
 def search_wall_bound(walls: list[tuple], right: float, turn_rad: float, yaw_margin_rad: float) -> float | None:
-    """The nearest the wall's face can be (forward coordinate) at ``right`` across the heading, by every look's
-    last sight of it (forward, right, measured turn or None): a turned wall is nearer on one side (allowed for
+    """The nearest the wall's face can be (forward coordinate) at ``right`` across the heading, by the earlier
+    looks' sights of it (forward, right, measured turn or None): a turned wall is nearer on one side (allowed for
     up to ``turn_rad``, or, its turn measured, for that give or take ``yaw_margin_rad``), and beyond the wall's
     end the flow shows only what is behind it (measured: a vehicle walked past a wall's end, then stepped
-    sideways into it).  The nearest of the looks' bounds counts: one taken far across, or with a turn measured
-    wrong, may put the wall too far (measured, hard world seed 41: a third look began 0.3 m from the wall)."""
+    sideways into it).  The nearest of the sights' bounds counts: one taken far across, or with a turn measured
+    wrong, may put the wall too far (measured, hard world seed 41: a third look began 0.3 m from the wall), and so
+    may one taken past the wall's end, of what lies behind it (seed 105: see Mission._servo_searching)."""
     return min((_wall_limit(w, right, turn_rad, yaw_margin_rad, -1.0) for w in walls), default=None)
 
 

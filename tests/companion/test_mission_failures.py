@@ -762,3 +762,51 @@ def test_a_look_that_sees_nothing_in_front_of_its_placed_opening_steps_back_once
     # sent after the sixth frame: two that saw it, then unseen_step_back_after that saw nothing
     assert steps.index(back) == 2 + mission.config.unseen_step_back_after - 1
     mission.record.runlog.close()
+
+
+class WallThenBeyondItsEnd(WallFlow):
+    """On the start's axis (within 0.5 m across), the wall's flow for the first ``wall_pairs`` pairs, then that of a
+    surface 1.5 m behind it (a look that followed something past the wall's end reads what lies behind the end as
+    the wall); off the axis, no flow at all."""
+
+    def __init__(self, link: ScriptedLink, wall_n: float, wall_pairs: int) -> None:
+        super().__init__(link, wall_n)
+        self.wall_pairs = wall_pairs
+
+    def estimate(self, a, b):
+        on_axis = abs(self.link.telemetry.position[1]) < 0.5
+        self.wrong_every = 1 if self.pairs >= self.wall_pairs else 0
+        flow = super().estimate(a, b)
+        return flow if on_axis else np.zeros_like(flow)
+
+
+def test_a_later_look_starts_short_of_the_nearest_wall_any_sight_of_an_earlier_look_allows(tmp_path):
+    """The search bounds a look's start by every sight of the wall the earlier looks took with its turn measured,
+    not only by each look's last (Mission._wall_sights): a first look that read the wall, then followed something
+    past its end and read what lies behind the end, would start the next look too near the wall (measured, hard
+    world seed 105, hard_1719364450: the second look began beside the wall's end, past its face, and backed into
+    its corner)."""
+    from companion.gap import _no_gap
+    from companion.mission import Refusal
+    from companion.servo import ServoConfig
+
+    link = RecordingLink()
+    link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)
+    on_axis = SmallHole()
+
+    def detector(flow):
+        if abs(link.telemetry.position[1]) < 0.5:
+            return on_axis(flow)
+        return _no_gap(flow.shape[:2], "nothing", "fake")
+
+    config = MissionConfig(estimate_wait_s=0.01, step_timeout_s=0.01)
+    mission = Mission(link, StillCamera(), WallThenBeyondItsEnd(link, 3.0, wall_pairs=4), detector,
+                      RunLog(tmp_path, images=False), config=config)
+    mission.yaw = 0.0
+    with pytest.raises(Refusal, match="looked again"):
+        mission._servo_searching((0.0, 0.0, -1.5))
+    aside = [p for p in link.setpoints if abs(p[1]) > 1.0]
+    assert aside, "the search never looked from aside"
+    # by the last sight alone (4.5 m, what lies behind the end) the looks walked to 3.0 and 3.4 m, onto the wall
+    # and past it; by every sight each stays further from the wall than the hold distance
+    assert max(p[0] for p in aside) < 3.0 - ServoConfig().hold_distance_m
