@@ -808,5 +808,5 @@ def test_a_later_look_starts_short_of_the_nearest_wall_any_sight_of_an_earlier_l
     aside = [p for p in link.setpoints if abs(p[1]) > 1.0]
     assert aside, "the search never looked from aside"
     # by the last sight alone (4.5 m, what lies behind the end) the looks walked to 3.0 and 3.4 m, onto the wall
-    # and past it; by every sight each stays further from the wall than the hold distance
+    # and past it; by every sight with the turn measured each stays further from the wall than the hold distance
     assert max(p[0] for p in aside) < 3.0 - ServoConfig().hold_distance_m
