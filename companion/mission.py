@@ -65,7 +65,7 @@ class Mission:
         self._steps_before = 0    # servo steps of the looks before this one
         self._home_z = 0.0        # home's down coordinate (NED), taken on the ground at arming
         self._wall_seen = None    # (forward, right, turn) of the wall's face as last measured (m, m, rad or None)
-        self._wall_sights = []    # every such sight of the current look
+        self._wall_sights = []    # every such sight of the current look taken with the wall's turn measured
         # Once the wall's distance is known, the opening's clear centre is tracked where it is in the world
         # (companion.opening): a frame without a detection then steers by the vehicle's own motion instead of
         # repeating the last step (measured: re-applied 0.25 m steps towards a stale image position ran a
@@ -161,7 +161,7 @@ class Mission:
         # hard world seed 105, hard_1719364450: the second look began beside the wall's end, past its face, and
         # backed into its corner).  Not the sights before the turn was measured: allowed a 25° turn either way across
         # 3 m, they held later looks up to 1.7 m further back (hard world seeds 99 and 101: four passable flights lost)
-        sights = [s for s in self._wall_sights if s[2] is not None]
+        sights = list(self._wall_sights)
         ahead, axis = self._forward(start), self._across(start)[0]
         seen = first.place[0] if first.place is not None else self._across(self.link.telemetry.position)[0]
         side = 1.0 if seen >= axis else -1.0
@@ -193,7 +193,7 @@ class Mission:
                 looks.append(f"from {where}: {exc}")
                 if self._wall_seen is not None:
                     walls.append(self._wall_seen)
-                sights += [s for s in self._wall_sights if s[2] is not None]
+                sights += self._wall_sights
                 if exc.place is not None:
                     avoid.append(exc.place)
         raise Refusal(f"{first}; looked again " + "; ".join(looks))
@@ -301,7 +301,8 @@ class Mission:
                 # the third look began 3 m from the wall, held short of it as if it were within 1.6 m, and saw
                 # the opening in 6 of 24 frames from there)
                 self._wall_seen = (view.here + ahead, view.across, view.wall_yaw)
-                self._wall_sights.append(self._wall_seen)
+                if view.wall_yaw is not None:
+                    self._wall_sights.append(self._wall_seen)
             if used is None and ahead is not None and ahead <= cfg.hold_distance_m:
                 why = f"no opening in sight with the wall {wall_ahead_words(ahead, view.ahead_basis)}: not flying on"
                 self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed, why)
