@@ -55,6 +55,8 @@ def detect_gap_in_colour(flow_bgr: np.ndarray, config: GapDetectorConfig = GapDe
     return _from_contour((h, w), best, detector)
 
 
-def detect_gap(flow: np.ndarray, config: GapDetectorConfig = GapDetectorConfig()) -> GapDetection:
-    """The paper's gap detector on an H×W×2 flow field (colours it, normalised by its largest magnitude)."""
+def detect_gap(flow: np.ndarray, config: GapDetectorConfig = GapDetectorConfig(),
+               textured: np.ndarray | None = None) -> GapDetection:
+    """The paper's gap detector on an H×W×2 flow field (colours it, normalised by its largest magnitude).
+    ``textured`` is taken for the detectors' common call and not read: the paper reads the flow alone."""
     return detect_gap_in_colour(flow_to_colour(flow, bgr=True), config, detector="paper")

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.edges import EdgeConfig, refine_detection
-from companion.gap import _no_gap
+from companion.gap import _no_gap, textured_pixels
 from companion.motion import body_to_world_from_euler, level_pixel, rotational_flow
 
 
@@ -28,7 +28,8 @@ def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: 
     """``prev_attitude``/``attitude``: (roll, pitch, yaw) estimates at the two frames' time stamps.
     ``baseline_m``: how far the camera moved between them; under ``min_baseline_m`` the pair has no parallax to
     show and is not looked at (the flow is still returned): the flow of a camera that did not move is noise, and
-    the detector finds "openings" in it.  ``edges``: read each opening's edge again from the two frames
+    the detector finds "openings" in it.  ``detector(flow, textured=...)`` is given the first frame's textured
+    pixels too (:func:`companion.gap.textured_pixels`).  ``edges``: read each opening's edge again from the two frames
     (:mod:`companion.edges`); None leaves the detector's masks as they are."""
     t0 = time.perf_counter()
     flow = flow_backend.estimate(prev_rgb, rgb)
@@ -42,7 +43,7 @@ def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: 
         detection = _no_gap(flow.shape[:2], f"the camera moved {baseline_m:.3f} m between the frames, under the "
                             f"{min_baseline_m:.3f} m a parallax needs: not looked at", "baseline")
     else:
-        detection = detector(flow)
+        detection = detector(flow, textured=textured_pixels(prev_rgb))
         if edges is not None:
             detection = refine_detection(detection, prev_rgb, rgb, flow, rotational, K, edges)
     detect_ms = (time.perf_counter() - t0) * 1000

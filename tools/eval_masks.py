@@ -120,14 +120,17 @@ def camera_translation(camera, pose1, pose2) -> tuple[float, float, float]:
 
 
 def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2, frames=None):
-    """``frames``: the pair's two RGB images, which "parallax_edges" reads the edges from."""
-    from companion.gap import CameraMotion, ParallaxGapConfig, detect_gap_parallax
+    """``frames``: the pair's two RGB images: the parallax detectors read the first's texture (as flown), and
+    "parallax_edges" the edges from both."""
+    from companion.gap import CameraMotion, ParallaxGapConfig, detect_gap_parallax, textured_pixels
     from companion.gap_paper import detect_gap
+
+    textured = textured_pixels(frames[0]) if frames is not None else None
 
     if name == "parallax_edges":
         from companion.edges import refine_detection
 
-        found = run_detector("parallax", flow, camera, pose1, pose2)
+        found = run_detector("parallax", flow, camera, pose1, pose2, frames)
         level = np.zeros((*flow.shape[:2], 2), np.float32)      # the viewpoints are level: no rotation's flow
         return refine_detection(found, frames[0], frames[1], flow, level, camera.K)
     if name == "paper":
@@ -136,10 +139,11 @@ def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2, frames=None)
         # "parallax" is the detector as flown, whatever its defaults; "parallax_end" that with past_the_end on
         config = ParallaxGapConfig(past_the_end=True) if name == "parallax_end" else ParallaxGapConfig()
         return detect_gap_parallax(flow, config,
-                                   motion=CameraMotion(focal_px=camera.fy, principal_point=_cv_pp(camera)))
+                                   motion=CameraMotion(focal_px=camera.fy, principal_point=_cv_pp(camera)),
+                                   textured=textured)
     if name == "parallax_known":
         motion = CameraMotion(camera_translation(camera, pose1, pose2), camera.fy, _cv_pp(camera))
-        return detect_gap_parallax(flow, motion=motion)
+        return detect_gap_parallax(flow, motion=motion, textured=textured)
     raise KeyError(f"unknown detector {name!r}; choose from {DETECTORS}")
 
 

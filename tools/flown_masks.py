@@ -88,7 +88,7 @@ def score_pair(cloud, spec, camera, first: dict, second: dict, backend, configs:
     0.9-2 m ahead (where the servo decides) or the camera moved under 2 cm."""
     import cv2
 
-    from companion.gap import CameraMotion, clear_circle, detect_gap_parallax
+    from companion.gap import CameraMotion, clear_circle, detect_gap_parallax, textured_pixels
     from companion.motion import derotate, off_heading, tilted_pixel
     from companion.opening_geometry import edge_distance_px
     from scenes import Pose, render_splats
@@ -115,8 +115,9 @@ def score_pair(cloud, spec, camera, first: dict, second: dict, backend, configs:
     ahead = (axis[0] + (p1[1] - p0[1]) * shift, axis[1] + (p1[2] - p0[2]) * shift)
     motion = (p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2])
     row = {"motion_m": motion, "wall_m": forward, "sideways": is_sideways(motion), "fills": {}}
+    textured = textured_pixels(a.rgb)
     for name, config in configs.items():
-        det = detect_gap_parallax(flow, config, CameraMotion(focal_px=focal))
+        det = detect_gap_parallax(flow, config, CameraMotion(focal_px=focal), textured)
         overlaps = [(int(np.logical_and(det.mask, labels == k).sum()), k) for k in range(1, n_labels)]
         best = max(overlaps) if overlaps else (0, 0)
         if not det.found or best[0] == 0:

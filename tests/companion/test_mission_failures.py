@@ -188,9 +188,9 @@ def test_a_look_that_saw_nothing_for_blind_frames_looks_past_the_walls_end_too(t
     calls = []
 
     def counted(name, detector):
-        def detect(flow):
+        def detect(flow, textured=None):
             calls.append(name)
-            return detector(flow)
+            return detector(flow, textured=textured)
         return detect
 
     mission = Mission(ScriptedLink(), StillCamera(), make_flow_backend("dis", preset="fast"),
@@ -316,7 +316,7 @@ class HalfTheFrame:
     def __init__(self) -> None:
         self.looked = 0
 
-    def __call__(self, flow):
+    def __call__(self, flow, textured=None):
         from companion.gap import GapDetection
 
         self.looked += 1
@@ -468,7 +468,7 @@ class WallFlow:
 class SmallHole:
     """A detector that sees an opening straight ahead, 2 px in clear radius: too small to fly through."""
 
-    def __call__(self, flow):
+    def __call__(self, flow, textured=None):
         from companion.gap import GapDetection
 
         h, w = flow.shape[:2]
@@ -547,7 +547,8 @@ def test_a_look_that_never_read_the_wall_leaves_the_next_look_only_the_earlier_l
             mission._servo((0.0, 0.0, -1.5), (), prior, (0.0, 1.2))
         return mission._wall_seen, str(refused.value)
 
-    seen, why = look(lambda link: ZeroFlow(), lambda flow: _no_gap(flow.shape[:2], "nothing", "fake"), 2.0)
+    seen, why = look(lambda link: ZeroFlow(), lambda flow, textured=None: _no_gap(flow.shape[:2], "nothing", "fake"),
+                     2.0)
     assert seen is None and "the bound earlier looks put on it" in why
     seen, _ = look(lambda link: WallFlow(link, 3.0), SmallHole(), 2.9)
     assert seen is not None and seen[0] == pytest.approx(3.0, abs=0.15)
@@ -560,7 +561,7 @@ class LowHole:
     def __init__(self, frames: int | None = None) -> None:
         self.frames, self.calls = frames, 0
 
-    def __call__(self, flow):
+    def __call__(self, flow, textured=None):
         from companion.gap import GapDetection, _no_gap
 
         self.calls += 1
@@ -596,7 +597,7 @@ def test_no_servo_step_goes_below_the_minimum_altitude(tmp_path):
 class WallPatch:
     """A detector that takes the left half of the frame for an opening, whatever the flow shows there."""
 
-    def __call__(self, flow):
+    def __call__(self, flow, textured=None):
         from companion.gap import GapDetection
 
         h, w = flow.shape[:2]
@@ -648,7 +649,7 @@ def _wide_hole_right(h: int, w: int) -> tuple[np.ndarray, tuple[float, float]]:
 class WideHoleRight:
     """A detector that sees :func:`_wide_hole_right`."""
 
-    def __call__(self, flow):
+    def __call__(self, flow, textured=None):
         from companion.gap import GapDetection
 
         mask, centre = _wide_hole_right(*flow.shape[:2])
@@ -794,7 +795,7 @@ def test_a_later_look_starts_short_of_the_nearest_wall_any_sight_of_an_earlier_l
     link.telemetry.armed, link.telemetry.position = True, (0.0, 0.0, -1.5)
     on_axis = SmallHole()
 
-    def detector(flow):
+    def detector(flow, textured=None):
         if abs(link.telemetry.position[1]) < 0.5:
             return on_axis(flow)
         return _no_gap(flow.shape[:2], "nothing", "fake")

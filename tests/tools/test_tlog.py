@@ -550,7 +550,7 @@ def test_replay_uses_the_detector_each_frame_was_flown_with(tmp_path, monkeypatc
     used = []
 
     def detector(name):
-        def detect(flow):
+        def detect(flow, textured=None):
             used.append(name)
             return gap.detect_gap_parallax(flow)
         return detect

@@ -1,0 +1,61 @@
+"""The parallax detector, finding no hole, sets aside the plain regions at the image's border and looks again
+(ParallaxGapConfig.plain_aside).
+
+Past a wall's end the camera sees empty space: no texture, and a flow network reads it as barely moving, the
+deepest thing in view.  Each split of log ρ then peels that region off, and a hole in the wall, nearer than it,
+stays in the near class.  The flows are a lateral step's (t = (1, 0, 0)), so the inverse depth read back is the
+one drawn.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from companion import gap
+from companion.gap import CameraMotion, ParallaxGapConfig
+from tests.companion.synthetic import iou
+
+H, W, F = 120, 160, 100.0
+LATERAL = CameraMotion(translation=(1.0, 0.0, 0.0), focal_px=F)
+HOLE = np.zeros((H, W), bool)
+HOLE[40:80, 70:110] = True
+VOID = np.zeros((H, W), bool)
+VOID[:, :40] = True                                  # past the wall's end, on the left
+FLOWN = ParallaxGapConfig(occlusion_fill=None)       # every far pixel has its true flow here: nothing to fill
+SPLITS_ONLY = dataclasses.replace(FLOWN, against_wall=False)
+
+
+def lateral_flow(rho: np.ndarray) -> np.ndarray:
+    flow = np.zeros((H, W, 2), np.float32)
+    flow[..., 0] = -rho * F
+    return flow
+
+
+def wall_with(hole_rho: float, void_rho: float, seed: int = 0) -> np.ndarray:
+    """ρ 0.5 on the wall, ``hole_rho`` through the hole, ``void_rho`` past the wall's end, 2 % noise."""
+    rho = np.where(VOID, void_rho, np.where(HOLE, hole_rho, 0.5))
+    return lateral_flow(rho * np.exp(np.random.default_rng(seed).normal(0.0, 0.02, (H, W))))
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("config", [SPLITS_ONLY, FLOWN], ids=["splits", "flown"])
+def test_a_hole_nearer_than_the_empty_space_past_the_walls_end_is_found_with_it_set_aside(config, seed):
+    flow = wall_with(hole_rho=0.3, void_rho=0.005, seed=seed)
+    blind = gap.detect_gap_parallax(flow, SPLITS_ONLY, LATERAL)
+    assert not blind.found                            # the split peels the empty space; the hole stays near
+    found = gap.detect_gap_parallax(flow, config, LATERAL, textured=~VOID)
+    assert found.found and iou(found.mask, HOLE) > 0.9
+    off = gap.detect_gap_parallax(flow, dataclasses.replace(SPLITS_ONLY, plain_aside=False), LATERAL, ~VOID)
+    assert not off.found
+
+
+def test_a_plain_region_walled_all_round_is_not_set_aside():
+    """Sky through a window, beside the empty space past the wall's end: plain inside, beyond a texture's reach of
+    the window's edge, and walled all round: part of the opening."""
+    textured = ~VOID
+    textured[43:77, 73:107] = False
+    found = gap.detect_gap_parallax(wall_with(hole_rho=0.3, void_rho=0.005), SPLITS_ONLY, LATERAL, textured)
+    assert found.found and iou(found.mask, HOLE) > 0.9
