@@ -15,7 +15,6 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from companion.gap import textured_pixels
 from companion.motion import off_heading, tilted_pixel, translation_in_camera
 from companion.opening import OpeningTracker, Sight, candidates_in
 from companion.servo import (
@@ -77,8 +76,8 @@ class FrameView:
 
 def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: float, still: bool, K,
               yaw: float, openings: OpeningTracker, wall: WallTrack) -> FrameView:
-    """One frame pair of a look: ``seen`` (companion.perception's flow and detection, on the first frame's
-    pixels), the first frame's image, the autopilot's position estimates at both frames and its attitude at the
+    """One frame pair of a look: ``seen`` (companion.perception's flow, detection and textured pixels, on the first
+    frame's pixels), the first frame's image, the autopilot's position estimates at both frames and its attitude at the
     first, how far the camera moved between them (``still``: too little for parallax), the camera matrix and the
     initial heading.  Updates ``openings`` and ``wall``."""
     flow, top = seen.flow, seen.detection
@@ -95,7 +94,7 @@ def see_frame(seen, prev_rgb, prev_position, position, prev_attitude, moved: flo
     # flow's own focus of expansion is pulled off by the empty space beyond a wall's end: measured, hard world
     # seed 60, readings 5-28 % long there, and a vehicle walked into the wall)
     direction = translation_in_camera(prev_position, position, prev_attitude)
-    textured = textured_pixels(prev_rgb) if not still else None
+    textured = seen.textured if not still else None
     # A detection whose depth is the wall's is a patch of it, not an opening (OpeningConfig.max_depth_ratio:
     # measured, hard world seed 64, a sideways step past a turned wall showed its farther half as a "gap" 42 % of
     # the frame, pushed at once from 2.2 m into the wall; on seed 60, blobs on a wall followed to it).  Only with

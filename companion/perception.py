@@ -20,6 +20,7 @@ class Perception:
     level_centroid: tuple[float, float] | None  # the detection's centroid as a level camera would see it
     flow_ms: float
     detect_ms: float
+    textured: np.ndarray  # H×W bool: the first frame's pixels whose flow says something of their depth
 
 
 def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: np.ndarray, flow_backend,
@@ -39,15 +40,16 @@ def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: 
     flow = flow - rotational
     flow_ms = (time.perf_counter() - t0) * 1000
     t0 = time.perf_counter()
+    textured = textured_pixels(prev_rgb)
     if baseline_m is not None and baseline_m < min_baseline_m:
         detection = _no_gap(flow.shape[:2], f"the camera moved {baseline_m:.3f} m between the frames, under the "
                             f"{min_baseline_m:.3f} m a parallax needs: not looked at", "baseline")
     else:
-        detection = detector(flow, textured=textured_pixels(prev_rgb))
+        detection = detector(flow, textured=textured)
         if edges is not None:
             detection = refine_detection(detection, prev_rgb, rgb, flow, rotational, K, edges)
     detect_ms = (time.perf_counter() - t0) * 1000
     # The servo reads image position as position error: measure it in a level camera (see level_pixel).
     level = (level_pixel(detection.centroid, K, attitude[0], attitude[1])
              if detection.centroid is not None else None)
-    return Perception(flow, detection, level, flow_ms, detect_ms)
+    return Perception(flow, detection, level, flow_ms, detect_ms, textured)

@@ -61,7 +61,7 @@ def test_a_frame_pair_of_a_forward_step_reads_the_wall_and_places_the_opening():
     """companion.look.see_frame on synthetic forward flow: a wall at 2 m north with an opening right of the
     centre, the vehicle stepping 0.2 m on per pair along a heading of 0° (forward flow's magnitude is the
     second frame's inverse depth times the step)."""
-    from companion.gap import get_detector
+    from companion.gap import get_detector, textured_pixels
     from companion.opening import OpeningTracker
     from companion.perception import Perception
     from companion.wall import WallTrack
@@ -78,7 +78,7 @@ def test_a_frame_pair_of_a_forward_step_reads_the_wall_and_places_the_opening():
                    for x, y in ((0.35, -0.2), (0.6, -0.2), (0.6, 0.2), (0.35, 0.2))]
         flow, truth = translation_flow(H, W, (0.0, 0.0, 1.0), opening, rho_near=1 / ahead, rho_far=1 / (ahead + 3),
                                        focal=FOCAL_320x240, scale=0.2)
-        seen = Perception(flow, detector(flow), None, 0.0, 0.0)
+        seen = Perception(flow, detector(flow), None, 0.0, 0.0, textured_pixels(rgb))
         view = see_frame(seen, rgb, (0.2 * k, 0.0, -1.5), (0.2 * (k + 1), 0.0, -1.5), (0.0, 0.0, 0.0), 0.2, False,
                          K, 0.0, openings, wall)
         assert view.found and view.measured == pytest.approx(ahead, rel=0.03)
