@@ -7,8 +7,9 @@ Two detectors share one result type, :class:`GapDetection`: the paper's colour-e
 depend on flow direction.  For a camera that translates (no rotation), the flow at a pixel is
 ``F = ρ·g(x, y; t)`` with ρ = |T|/Z the inverse depth (in units of the step length) and g known from the
 intrinsics and the translation direction t (estimated from the flow by least squares when not given).
-ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion) and away from the
-image border, inpainted elsewhere, and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
+ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion); nearer the focus, where
+it would divide by almost nothing, by least squares over a small window (``focus_window_px``); it is inpainted
+within the image border and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
 (floor, wall); the far class of the sharpest significant depth step is what lies beyond the opening.  The
 largest far component inside the size bounds and enclosed by a nearer surface is the mask, with the band of
 it that the wall hides in the second frame filled back (the flow there follows the wall).  With
@@ -187,6 +188,13 @@ class ParallaxGapConfig:
                                         # docs/perception.md).  A plain region walled all round (sky through a
                                         # window) is kept.  Set aside in every pair, not only where none is found,
                                         # hard seed 103 flew 92 -> 89/100
+    # Near the focus of expansion flow says little of depth pixel by pixel; a window of them still says it.
+    focus_window_px: int | None = 9     # where |g| < min_g_frac·max|g|, ρ is fitted by least squares over this
+                                        # square window (ΣF·g / Σ|g|², see _focus_inverse_depth), not inpainted
+                                        # from around: flying at an opening puts the focus in it, and at 3 m a
+                                        # 0.5 m opening lies inside the 16 px disc (random seeds 7-10, RAFT 2212 ->
+                                        # 2261 of 2304 pairs detected, DIS fine 2212 -> 2260, median IoU level;
+                                        # docs/perception.md).  None: inpainted as before 2026-12-07
     texture_min_gradient: float = 20.0  # grey Sobel magnitude (of 255) of a textured pixel ...
     texture_reach_px: int = 4           # ... and the pixels this near one (a plain patch of a textured wall
                                         # is a few pixels across; its flow is the wall's)
@@ -293,6 +301,27 @@ def _inverse_depth(flow: np.ndarray, motion: CameraMotion,
     return rho, valid, (g_u, g_v)
 
 
+def _focus_inverse_depth(flow: np.ndarray, rho: np.ndarray, valid: np.ndarray, g: tuple[np.ndarray, np.ndarray],
+                         window_px: int) -> tuple[np.ndarray, np.ndarray]:
+    """``rho`` and ``valid`` with the pixels too near the focus of expansion (finite flow, not ``valid``) given
+    the inverse depth that fits the flow of a ``window_px`` square around each by least squares, ΣF·g / Σ|g|²:
+    one pixel's |g| there is too small to divide by, a window's Σ|g|² is not, even at the focus itself."""
+    u = flow[..., 0].astype(np.float64)
+    v = flow[..., 1].astype(np.float64)
+    finite = np.isfinite(u) & np.isfinite(v)
+    g_u, g_v = g
+
+    def window_sum(values: np.ndarray) -> np.ndarray:
+        return cv2.boxFilter(np.where(finite, values, 0.0), -1, (window_px, window_px), normalize=False,
+                             borderType=cv2.BORDER_REPLICATE)
+
+    flow_along_g, g_squared = window_sum(u * g_u + v * g_v), window_sum(g_u * g_u + g_v * g_v)
+    near_focus = finite & ~valid
+    rho, valid = rho.copy(), valid | near_focus
+    rho[near_focus] = flow_along_g[near_focus] / np.maximum(g_squared[near_focus], 1e-12)
+    return rho, valid
+
+
 def _otsu_split(values: np.ndarray) -> tuple[int, float]:
     """Otsu threshold of 8-bit ``values`` (1-D) and its separability η = σ²_between / σ²_total."""
     t, _ = cv2.threshold(values.reshape(-1, 1), 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
@@ -386,11 +415,15 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
     mag = np.hypot(flow[..., 0], flow[..., 1])
     if not np.isfinite(mag).any() or float(np.nanmedian(mag)) < config.min_flow_px:
         return _no_gap((h, w), "flow too small to measure parallax", det)
-    rho, valid, g = _inverse_depth(flow, motion, config)
+    rho, away_from_focus, g = _inverse_depth(flow, motion, config)
+    valid = away_from_focus.copy()
+    if config.focus_window_px:
+        rho, valid = _focus_inverse_depth(flow, rho, valid, g, config.focus_window_px)
     if config.border_px > 0:
         b = config.border_px
-        valid[:b], valid[-b:], valid[:, :b], valid[:, -b:] = False, False, False, False
-    if valid.sum() < 0.2 * h * w:
+        for mask in (valid, away_from_focus):
+            mask[:b], mask[-b:], mask[:, :b], mask[:, -b:] = False, False, False, False
+    if away_from_focus.sum() < 0.2 * h * w:     # the window fills a disc around the focus, not most of the frame
         return _no_gap((h, w), "too few pixels away from the focus of expansion", det)
     positive = valid & (rho > 0)
     if positive.sum() < 0.5 * valid.sum():

@@ -7,8 +7,9 @@ sweep of 100 flights judges only a dozen of them.  This renders many such openin
   scaled so that its clear radius, square to the wall (``scenes.groundtruth.corridor_clearance``), is drawn
   uniformly within ``--band`` of the threshold (the servo's body radius plus margin);
 - ``--pairs`` frame pairs per scene, flown toward the opening's clear centre along the start heading: the first
-  frame 0.87-1.67 m from the wall (by default), a forward step of 0.12-0.22 m, a few centimetres and a few
-  hundredths of a radian of jitter;
+  frame 0.87-1.67 m from the wall (by default), a forward step of 0.12-0.22 m (``--motion sideways``: the step
+  across the heading instead, both frames at the first's distance), a few centimetres and a few hundredths of a
+  radian of jitter;
 - each pair goes through the flow backend, the derotation, the parallax detector and the edges read again from the
   frames (:mod:`companion.edges`; ``--edges flow`` leaves the detector's masks) as flown; the widest opening
   it finds is stretched to the wall's plane (:func:`companion.opening.turned_wall_stretch`, with the true turn)
@@ -92,6 +93,26 @@ def approach_pose(spec, centre_yz: tuple[float, float], distance_m: float, acros
     y = centre_yz[0] - distance_m * math.sin(yaw) + across_m[0] * math.cos(yaw)
     euler = (tilt[0], tilt[1], yaw)
     return Pose((x, y, centre_yz[1] + across_m[1]), euler_to_quat(*euler)), euler
+
+
+def pair_poses(spec, centre_yz: tuple[float, float], rng, distance_m: tuple[float, float], motion: str = "forward"):
+    """One pair's ((pose, euler), (pose, euler)) and the first frame's distance along the heading to the clear
+    centre (as the servo's wall reading is).  ``forward``: a step of 0.12-0.22 m toward the wall, the second frame
+    ``distance_m`` (NEAR, FAR) from it, as on the approach; ``sideways``: the same step across the heading, to the
+    right or left, at the first frame's distance.  A few centimetres and hundredths of a radian of jitter."""
+    near = float(rng.uniform(*distance_m))
+    step = float(rng.uniform(0.12, 0.22))
+    across = rng.normal(0.0, 0.02, 2)
+    if motion == "sideways":
+        side = np.array([step * float(rng.choice((-1.0, 1.0))) / 2.0, 0.0])
+        first = approach_pose(spec, centre_yz, near + step, tuple(across - side), tuple(rng.normal(0.0, 0.01, 2)))
+        second = approach_pose(spec, centre_yz, near + step + float(rng.normal(0.0, 0.01)),
+                               tuple(across + side + rng.normal(0.0, 0.01, 2)), tuple(rng.normal(0.0, 0.01, 2)))
+    else:
+        first = approach_pose(spec, centre_yz, near + step, tuple(across), tuple(rng.normal(0.0, 0.01, 2)))
+        second = approach_pose(spec, centre_yz, near, tuple(across + rng.normal(0.0, 0.01, 2)),
+                               tuple(rng.normal(0.0, 0.01, 2)))
+    return first, second, near + step
 
 
 def judge_scene(pairs: list[dict], tracker_config, servo_config) -> dict | None:
@@ -187,19 +208,13 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     turn = math.radians(spec.start_yaw_deg)
     rows = []
     for _ in range(args.pairs):
-        near = float(rng.uniform(*args.distance))
-        step = float(rng.uniform(0.12, 0.22))
-        across = rng.normal(0.0, 0.02, 2)
-        pose0, att0 = approach_pose(spec, centre, near + step, tuple(across), tuple(rng.normal(0.0, 0.01, 2)))
-        pose1, att1 = approach_pose(spec, centre, near, tuple(across + rng.normal(0.0, 0.01, 2)),
-                                    tuple(rng.normal(0.0, 0.01, 2)))
+        (pose0, att0), (pose1, att1), distance = pair_poses(spec, centre, rng, args.distance, args.motion)
         first, second = render_splats(cloud, camera, pose0), render_splats(cloud, camera, pose1)
         detection = perceive(first.rgb, second.rgb, att0, att1, camera.K, backend, detector,
                              edges=edges_for(args.edges)).detection
         truth = gt_mask(cloud, camera, pose0, first)
         n_labels, labels = cv2.connectedComponents(truth.astype(np.uint8))
         truth_px = max((clear_circle(labels == k)[1] for k in range(1, n_labels)), default=0.0)
-        distance = near + step          # along the heading to the clear centre, as the servo's wall reading is
         found = [c for c in (detection.candidates or (detection,)) if c.found]
         estimate = radius_px = None
         if found:
@@ -208,7 +223,8 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
                        if abs(turn) > TURN_NEGLIGIBLE_RAD else 1.0)
             radius_px = widest.clear_radius_px
             estimate = tracker.clear_radius_m(in_wall(widest.mask, stretch)[1], distance, focal)
-        rows.append({"scene": index, "distance_m": distance, "step_m": step, "turn_deg": spec.start_yaw_deg,
+        rows.append({"scene": index, "distance_m": distance, "step_m": float(np.linalg.norm(
+                         np.subtract(pose1.position, pose0.position))), "turn_deg": spec.start_yaw_deg,
                      "thickness_m": spec.wall.thickness, "shape": spec.openings[0].shape, "truth_m": truth_m,
                      "truth_radius_px": truth_px, "mask_radius_px": radius_px, "estimate_m": estimate})
     return rows, judge_scene(rows, tracker.config, servo)
@@ -230,7 +246,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--band", type=float, default=0.05, metavar="M",
                         help="clear radii drawn within this of the fit threshold (metres)")
     parser.add_argument("--distance", type=float, nargs=2, default=(0.75, 1.45), metavar=("NEAR", "FAR"),
-                        help="the second frame's distance from the wall (metres); the first is a step further")
+                        help="the second frame's distance from the wall (metres); the first is a step further (with "
+                             "--motion sideways, both frames)")
+    parser.add_argument("--motion", choices=("forward", "sideways"), default="forward",
+                        help="each pair's step: along the heading toward the wall, as on the approach, or across it")
     parser.add_argument("--flow", default=DEFAULT_FLOW, help="flow backend, as flowgap-companion --flow")
     parser.add_argument("--edges", choices=EDGE_MODES, default="photo",
                         help="openings' edges read again from the frames, as flown (photo), or the detector's masks")

@@ -113,3 +113,19 @@ def test_bad_arguments_are_refused_in_one_line(capsys):
     assert "--band" in capsys.readouterr().err
     assert size_error.main(["--flow", "nosuchflow"]) == 2
     assert capsys.readouterr().err.startswith("size_error: ")
+
+
+@pytest.mark.parametrize("motion", ["forward", "sideways"])
+def test_a_pair_steps_toward_the_wall_or_across_the_heading(motion):
+    spec = SceneSpec(start_yaw_deg=12.0)
+    heading = np.array([math.cos(math.radians(12.0)), math.sin(math.radians(12.0)), 0.0])
+    for seed in range(5):
+        (pose0, _), (pose1, _), distance = size_error.pair_poses(spec, (0.2, -1.4), np.random.default_rng(seed),
+                                                                 (0.75, 1.45), motion)
+        step = np.subtract(pose1.position, pose0.position)
+        along = float(step @ heading)
+        assert 0.87 <= distance <= 1.67
+        if motion == "forward":
+            assert 0.12 <= along <= 0.22 and np.linalg.norm(step - along * heading) < 0.08
+        else:
+            assert abs(along) < 0.04 and 0.12 - 0.05 < abs(step[0] * heading[1] - step[1] * heading[0]) < 0.22 + 0.05
