@@ -432,8 +432,9 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
     scored, reason = _hole_contours(rho, positive, motion, config, a_min, a_max)
     if not scored and textured is not None and config.plain_aside:
         plain = _reaching_border(~textured)
-        if plain.sum() >= a_min:
-            positive = positive & ~plain
+        rest = positive & ~plain
+        if plain.sum() >= a_min and rest.sum() >= a_min:    # what is left holds at least the smallest opening
+            positive = rest
             scored, _ = _hole_contours(rho, positive, motion, config, a_min, a_max, plain)
     if not scored:
         return _no_gap((h, w), reason, det)

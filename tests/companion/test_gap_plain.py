@@ -59,3 +59,13 @@ def test_a_plain_region_walled_all_round_is_not_set_aside():
     textured[43:77, 73:107] = False
     found = gap.detect_gap_parallax(wall_with(hole_rho=0.3, void_rho=0.005), SPLITS_ONLY, LATERAL, textured)
     assert found.found and iou(found.mask, HOLE) > 0.9
+
+
+def test_a_frame_almost_all_plain_is_not_searched_again():
+    """Nearly the whole frame plain and reaching the border (looking past a wall's end into empty space): what is
+    left after setting it aside is smaller than the smallest opening, so there is nothing to search again (the
+    second search once raised on an empty set of measurable pixels)."""
+    flow = wall_with(hole_rho=0.5, void_rho=0.5)     # no depth step anywhere: the first search finds nothing
+    for textured in (np.zeros((H, W), bool), np.pad(np.ones((4, 4), bool), ((58, H - 62), (78, W - 82)))):
+        found = gap.detect_gap_parallax(flow, FLOWN, LATERAL, textured=textured)
+        assert not found.found and found.reason.startswith("no depth contrast")
