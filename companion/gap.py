@@ -8,8 +8,8 @@ depend on flow direction.  For a camera that translates (no rotation), the flow 
 ``F = ρ·g(x, y; t)`` with ρ = |T|/Z the inverse depth (in units of the step length) and g known from the
 intrinsics and the translation direction t (estimated from the flow by least squares when not given).
 ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion); nearer the focus, where
-it would divide by almost nothing, by least squares over a small window (``focus_window_px``); it is inpainted
-within the image border and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
+it would divide by almost nothing, from the flow's rate of expansion over a small window (``focus_window_px``);
+it is inpainted within the image border and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
 (floor, wall); the far class of the sharpest significant depth step is what lies beyond the opening.  The
 largest far component inside the size bounds and enclosed by a nearer surface is the mask, with the band of
 it that the wall hides in the second frame filled back (the flow there follows the wall).  With
@@ -189,12 +189,12 @@ class ParallaxGapConfig:
                                         # window) is kept.  Set aside in every pair, not only where none is found,
                                         # hard seed 103 flew 92 -> 89/100
     # Near the focus of expansion flow says little of depth pixel by pixel; a window of them still says it.
-    focus_window_px: int | None = 9     # where |g| < min_g_frac·max|g|, ρ is fitted by least squares over this
-                                        # square window (ΣF·g / Σ|g|², see _focus_inverse_depth), not inpainted
-                                        # from around: flying at an opening puts the focus in it, and at 3 m a
-                                        # 0.5 m opening lies inside the 16 px disc (random seeds 7-10, RAFT 2212 ->
-                                        # 2261 of 2304 pairs detected, DIS fine 2212 -> 2260, median IoU level;
-                                        # docs/perception.md).  None: inpainted as before 2026-12-07
+    focus_window_px: int | None = 9     # where |g| < min_g_frac·max|g|, ρ is read from the flow's rate of
+                                        # expansion over this square window (see _focus_inverse_depth), not
+                                        # inpainted from around: flying at an opening puts the focus in it, and at
+                                        # 3 m a 0.5 m opening lies inside the 16 px disc (random seeds 7-10, RAFT
+                                        # 2212 -> 2251 of 2304 pairs detected, DIS fine 2212 -> 2249, median IoU
+                                        # level; docs/perception.md).  None: inpainted as before 2026-12-07
     texture_min_gradient: float = 20.0  # grey Sobel magnitude (of 255) of a textured pixel ...
     texture_reach_px: int = 4           # ... and the pixels this near one (a plain patch of a textured wall
                                         # is a few pixels across; its flow is the wall's)
@@ -304,21 +304,33 @@ def _inverse_depth(flow: np.ndarray, motion: CameraMotion,
 def _focus_inverse_depth(flow: np.ndarray, rho: np.ndarray, valid: np.ndarray, g: tuple[np.ndarray, np.ndarray],
                          window_px: int) -> tuple[np.ndarray, np.ndarray]:
     """``rho`` and ``valid`` with the pixels too near the focus of expansion (finite flow, not ``valid``) given
-    the inverse depth that fits the flow of a ``window_px`` square around each by least squares, ΣF·g / Σ|g|²:
-    one pixel's |g| there is too small to divide by, a window's Σ|g|² is not, even at the focus itself."""
-    u = flow[..., 0].astype(np.float64)
-    v = flow[..., 1].astype(np.float64)
-    finite = np.isfinite(u) & np.isfinite(v)
-    g_u, g_v = g
+    the inverse depth read from the flow's rate of expansion over a ``window_px`` square around each: F = a·p + b
+    fitted by least squares (p the pixel, a scalar a = ρ·t_z, b any vector), ρ = a / t_z.  One pixel's |g| there
+    is too small to divide by; a window's spread of pixels is not, even at the focus itself.  The focus's own place
+    drops out with b, so an error in it (the translation estimated from the flow, a rotation taken out imperfectly)
+    biases nothing: ΣF·g/Σ|g|² over the window reads a wall as farther the farther the focus is from where it was
+    estimated, a far "opening" at the focus."""
+    h, w = flow.shape[:2]
+    t_z = float(g[0][0, 1] - g[0][0, 0]) if w > 1 else 0.0     # g_u = x·t_z - f·t_x: its slope along x
+    finite = np.isfinite(flow).all(axis=-1)
+    near_focus = finite & ~valid
+    if abs(t_z) < 1e-6 or not near_focus.any():
+        return rho, valid
+    weight = finite.astype(np.float64)          # a pixel without flow counts for nothing in its windows
+    x, y = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    u = np.where(finite, flow[..., 0], 0.0).astype(np.float64)
+    v = np.where(finite, flow[..., 1], 0.0).astype(np.float64)
 
     def window_sum(values: np.ndarray) -> np.ndarray:
-        return cv2.boxFilter(np.where(finite, values, 0.0), -1, (window_px, window_px), normalize=False,
+        return cv2.boxFilter(values * weight, -1, (window_px, window_px), normalize=False,
                              borderType=cv2.BORDER_REPLICATE)
 
-    flow_along_g, g_squared = window_sum(u * g_u + v * g_v), window_sum(g_u * g_u + g_v * g_v)
-    near_focus = finite & ~valid
+    n = np.maximum(window_sum(np.ones_like(x)), 1.0)
+    sx, sy, su, sv = window_sum(x), window_sum(y), window_sum(u), window_sum(v)
+    spread = window_sum(x * x) - sx * sx / n + window_sum(y * y) - sy * sy / n
+    along = window_sum(u * x) - su * sx / n + window_sum(v * y) - sv * sy / n
     rho, valid = rho.copy(), valid | near_focus
-    rho[near_focus] = flow_along_g[near_focus] / np.maximum(g_squared[near_focus], 1e-12)
+    rho[near_focus] = along[near_focus] / (np.maximum(spread[near_focus], 1e-12) * t_z)
     return rho, valid
 
 
