@@ -7,9 +7,9 @@ Two detectors share one result type, :class:`GapDetection`: the paper's colour-e
 depend on flow direction.  For a camera that translates (no rotation), the flow at a pixel is
 ``F = ρ·g(x, y; t)`` with ρ = |T|/Z the inverse depth (in units of the step length) and g known from the
 intrinsics and the translation direction t (estimated from the flow by least squares when not given).
-ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion); nearer the focus, where
-it would divide by almost nothing, from the flow's rate of expansion over a small window (``focus_window_px``);
-it is inpainted within the image border and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
+ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion) and away from the
+image border, inpainted elsewhere (with ``focus_window_px``, off as flown, read near the focus from the flow's rate
+of expansion over a small window instead), and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
 (floor, wall); the far class of the sharpest significant depth step is what lies beyond the opening.  The
 largest far component inside the size bounds and enclosed by a nearer surface is the mask, with the band of
 it that the wall hides in the second frame filled back (the flow there follows the wall).  With
@@ -189,12 +189,14 @@ class ParallaxGapConfig:
                                         # window) is kept.  Set aside in every pair, not only where none is found,
                                         # hard seed 103 flew 92 -> 89/100
     # Near the focus of expansion flow says little of depth pixel by pixel; a window of them still says it.
-    focus_window_px: int | None = 9     # where |g| < min_g_frac·max|g|, ρ is read from the flow's rate of
-                                        # expansion over this square window (see _focus_inverse_depth), not
-                                        # inpainted from around: flying at an opening puts the focus in it, and at
-                                        # 3 m a 0.5 m opening lies inside the 16 px disc (random seeds 7-10, RAFT
-                                        # 2212 -> 2251 of 2304 pairs detected, DIS fine 2212 -> 2249, median IoU
-                                        # level; docs/perception.md).  None: inpainted as before 2026-12-07
+    focus_window_px: int | None = None  # where |g| < min_g_frac·max|g|, read ρ from the flow's rate of expansion
+                                        # over this square window (see _focus_inverse_depth) instead of inpainting
+                                        # it from around.  Off: it lifts the masks (9: random seeds 7-10, RAFT 2212
+                                        # -> 2251 of 2304 pairs detected, DIS fine 2212 -> 2249, median IoU level),
+                                        # but flown it gained nothing (hard seeds 103, 101: 92 -> 91, 94 -> 95), and
+                                        # its masks inside the disc move by several pixels between near-identical
+                                        # frames (a flight replayed from its logged poses, window1_brick, differed
+                                        # by 10.8 px at one step); docs/perception.md
     texture_min_gradient: float = 20.0  # grey Sobel magnitude (of 255) of a textured pixel ...
     texture_reach_px: int = 4           # ... and the pixels this near one (a plain patch of a textured wall
                                         # is a few pixels across; its flow is the wall's)

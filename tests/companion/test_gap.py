@@ -214,7 +214,7 @@ def test_a_wide_dead_disc_at_the_focus_of_expansion_inpainted_cuts_a_notch_where
     opening puts the focus in it, and where the filled disc reached the edge the wall's ρ was smeared into the
     opening.  The focus 8 px inside the left edge of a 53 x 51 px opening: inpainted, a disc of 4 % of the largest
     |g| (8 px) leaves the clear circle whole, the default's 8 % (16 px) cuts 2 px off it (4 % tried, not kept:
-    docs/evaluation.md); fitted over a window (the default since 2026-12-07), the 8 % disc leaves it whole."""
+    docs/evaluation.md); read over a window (focus_window_px, off as flown), the 8 % disc leaves it whole."""
     cx, cy = (W - 1) / 2, (H - 1) / 2
     polygon = [(cx - 8, cy - 25), (cx + 45, cy - 25), (cx + 45, cy + 25), (cx - 8, cy + 25)]
     flow, truth = translation_flow(H, W, (0.0, 0.0, 1.0), polygon, occlusion=True)
@@ -224,4 +224,5 @@ def test_a_wide_dead_disc_at_the_focus_of_expansion_inpainted_cuts_a_notch_where
     narrow = dataclasses.replace(inpainted, min_g_frac=0.04)
     assert detect_gap_parallax(flow, narrow, motion).clear_radius_px == pytest.approx(whole, abs=0.5)
     assert detect_gap_parallax(flow, inpainted, motion).clear_radius_px <= whole - 1.5
-    assert detect_gap_parallax(flow, ParallaxGapConfig(), motion).clear_radius_px == pytest.approx(whole, abs=0.5)
+    window = dataclasses.replace(inpainted, focus_window_px=9)
+    assert detect_gap_parallax(flow, window, motion).clear_radius_px == pytest.approx(whole, abs=0.5)

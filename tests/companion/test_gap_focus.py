@@ -1,5 +1,5 @@
 """Near the focus of expansion the parallax detector reads the inverse depth from the flow's rate of expansion over
-a window (ParallaxGapConfig.focus_window_px) instead of inpainting it from around.
+a window (ParallaxGapConfig.focus_window_px, off as flown) instead of inpainting it from around.
 
 Flying at an opening puts the focus of expansion in it, and one pixel's flow there is too small to divide by:
 the pixels within ``min_g_frac`` of the largest |g| (a 16 px disc at 320×240) used to be inpainted from the
@@ -19,6 +19,7 @@ from tests.companion.synthetic import FOCAL_320x240, iou, translation_flow
 H, W = 240, 320
 FORWARD = CameraMotion(translation=(0.0, 0.0, 1.0), focal_px=FOCAL_320x240)
 INPAINTED = ParallaxGapConfig(focus_window_px=None)
+WINDOW = ParallaxGapConfig(focus_window_px=9)
 
 
 def noisy(flow: np.ndarray, seed: int) -> np.ndarray:
@@ -43,7 +44,7 @@ def test_an_opening_inside_the_disc_around_the_focus_is_found(seed, dx):
                                   scale=0.1, occlusion=True)
     flow = noisy(flow, seed)
     assert not gap.detect_gap_parallax(flow, INPAINTED, FORWARD).found
-    found = gap.detect_gap_parallax(flow, ParallaxGapConfig(), FORWARD)
+    found = gap.detect_gap_parallax(flow, WINDOW, FORWARD)
     assert found.found and iou(found.mask, hole) > 0.5      # the window blurs the edges inside the disc
 
 
