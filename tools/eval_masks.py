@@ -125,8 +125,6 @@ def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2, frames=None)
     from companion.gap import CameraMotion, ParallaxGapConfig, detect_gap_parallax, textured_pixels
     from companion.gap_paper import detect_gap
 
-    textured = textured_pixels(frames[0]) if frames is not None else None
-
     if name == "parallax_edges":
         from companion.edges import refine_detection
 
@@ -135,6 +133,7 @@ def run_detector(name: str, flow: np.ndarray, camera, pose1, pose2, frames=None)
         return refine_detection(found, frames[0], frames[1], flow, level, camera.K)
     if name == "paper":
         return detect_gap(flow)
+    textured = textured_pixels(frames[0]) if frames is not None else None
     if name in ("parallax", "parallax_end"):
         # "parallax" is the detector as flown, whatever its defaults; "parallax_end" that with past_the_end on
         config = ParallaxGapConfig(past_the_end=True) if name == "parallax_end" else ParallaxGapConfig()
