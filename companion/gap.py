@@ -3,22 +3,21 @@
 Two detectors share one result type, :class:`GapDetection`: the paper's colour-edge pipeline
 (:mod:`companion.gap_paper`) and ours, here.
 
-:func:`detect_gap_parallax` works on the flow *vectors*, not on colour grey levels that
-depend on flow direction.  For a camera that translates (no rotation), the flow at a pixel is
-``F = ρ·g(x, y; t)`` with ρ = |T|/Z the inverse depth (in units of the step length) and g known from the
-intrinsics and the translation direction t (estimated from the flow by least squares when not given).
-ρ = F·g/|g|² is computed where |g| is large enough (away from the focus of expansion) and away from the
-image border, inpainted elsewhere (with ``focus_window_px``, off as flown, read near the focus from the flow's rate
-of expansion over a small window instead), and put on a log scale.  Repeated Otsu splits peel off nearer surfaces
-(floor, wall); the far class of the sharpest significant depth step is what lies beyond the opening.  The
-largest far component inside the size bounds and enclosed by a nearer surface is the mask, with the band of
-it that the wall hides in the second frame filled back (the flow there follows the wall).  With
-``past_the_end`` (off as flown), a sharpest step with no hole beyond it has its far parts at the image's border
-set aside, as what lies past the wall's end, and the rest is split again.  With ``against_wall`` (on), where
-no hole is found, log ρ is split again against the wall's plane fitted to it: a turned wall's far side is as
-deep as the background seen through an opening on its near side.  With ``plain_aside`` (on), where still no hole
-is found, the plain regions of the first frame that reach the image's border (the empty space past a wall's end)
-are set aside and the search runs again.
+:func:`detect_gap_parallax` works on the flow *vectors*, not on colour grey levels that depend on flow direction.
+For a camera that translates (no rotation), the flow at a pixel is ``F = ρ·g(x, y; t)`` with ρ = |T|/Z the inverse
+depth (in units of the step length) and g known from the intrinsics and the translation direction t (estimated from
+the flow by least squares when not given). ρ = F·g/|g|² is computed (:mod:`companion.inverse_depth`) where |g| is
+large enough (away from the focus of expansion) and away from the image border, inpainted elsewhere (with
+``focus_window_px``, off as flown, read near the focus from the flow's rate of expansion over a small window
+instead), and put on a log scale. Repeated Otsu splits peel off nearer surfaces (floor, wall); the far class of the
+sharpest significant depth step is what lies beyond the opening. The largest far component inside the size bounds
+and enclosed by a nearer surface is the mask, with the band of it that the wall hides in the second frame filled
+back (the flow there follows the wall). With ``past_the_end`` (off as flown), a sharpest step with no hole beyond it
+has its far parts at the image's border set aside, as what lies past the wall's end, and the rest is split again.
+With ``against_wall`` (on), where no hole is found, log ρ is split again against the wall's plane fitted to it: a
+turned wall's far side is as deep as the background seen through an opening on its near side. With ``plain_aside``
+(on), where still no hole is found, the plain regions of the first frame that reach the image's border (the empty
+space past a wall's end) are set aside and the search runs again.
 
 Both detectors take an H×W×2 float flow (u right, v down, pixels) and return a frozen :class:`GapDetection`.
 """
@@ -32,6 +31,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from companion.inverse_depth import CameraMotion, focal_px, focus_inverse_depth, inverse_depth, wall_plane_log
 
 log = logging.getLogger(__name__)
 
@@ -190,8 +191,8 @@ class ParallaxGapConfig:
                                         # hard seed 103 flew 92 -> 89/100
     # Near the focus of expansion flow says little of depth pixel by pixel; a window of them still says it.
     focus_window_px: int | None = None  # where |g| < min_g_frac·max|g|, read ρ from the flow's rate of expansion
-                                        # over this square window (see _focus_inverse_depth) instead of inpainting
-                                        # it from around.  Off: it lifts the masks (9: random seeds 7-10, RAFT 2212
+                                        # over this square window (inverse_depth.focus_inverse_depth), not
+                                        # inpainted.  Off: it lifts the masks (9: random seeds 7-10, RAFT 2212
                                         # -> 2251 of 2304 pairs detected, DIS fine 2212 -> 2249, median IoU level),
                                         # but flown it gained nothing (hard seeds 103, 101: 92 -> 91, 94 -> 95), and
                                         # its masks inside the disc move by several pixels between near-identical
@@ -212,128 +213,18 @@ def textured_pixels(rgb: np.ndarray, config: ParallaxGapConfig = ParallaxGapConf
     return cv2.dilate(strong, np.ones((reach, reach), np.uint8)).astype(bool)
 
 
-@dataclass(frozen=True)
-class CameraMotion:
-    """Translation of the camera between the two frames, in camera axes (x right, y down, z forward).
-
-    Only its direction matters.  ``focal_px`` and ``principal_point`` default to the flowgap camera model
-    (vertical FOV from the config, centred principal point).
-    """
-
-    translation: tuple[float, float, float] | None = None
-    focal_px: float | None = None
-    principal_point: tuple[float, float] | None = None
-
-
-def _pixel_grid(h: int, w: int, cx: float, cy: float) -> tuple[np.ndarray, np.ndarray]:
-    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
-    return xs - cx, ys - cy
-
-
-def estimate_translation(flow: np.ndarray, focal_px: float, principal_point: tuple[float, float],
-                         *, iterations: int = 3, stride: int = 2) -> np.ndarray:
-    """Camera translation direction (unit 3-vector, camera axes) from a translation-only flow field.
-
-    Each pixel gives one linear constraint: the flow is parallel to g = (x'·tz − f·tx, y'·tz − f·ty), i.e.
-    u·(y'·tz − f·ty) − v·(x'·tz − f·tx) = 0.  Solved as a homogeneous least-squares problem (SVD), with
-    iteratively reweighted residuals; the sign is chosen so that inverse depth comes out positive.
-    """
-    h, w = flow.shape[:2]
-    xs, ys = _pixel_grid(h, w, *principal_point)
-    u = flow[::stride, ::stride, 0].ravel().astype(np.float64)
-    v = flow[::stride, ::stride, 1].ravel().astype(np.float64)
-    xp, yp = xs[::stride, ::stride].ravel(), ys[::stride, ::stride].ravel()
-    ok = np.isfinite(u) & np.isfinite(v)
-    u, v, xp, yp = u[ok], v[ok], xp[ok], yp[ok]
-    f = focal_px
-    a = np.stack([f * v, -f * u, u * yp - v * xp], axis=1)   # coefficients of (tx, ty, tz)
-    mag = np.hypot(u, v) + 1e-6
-    a = a / mag[:, None]                                      # normalise: constraint is on the direction
-    weights = np.ones(len(a))
-    t = np.array([0.0, 0.0, 1.0])
-    for _ in range(iterations):
-        _, _, vt = np.linalg.svd(a * weights[:, None], full_matrices=False)
-        t = vt[-1]
-        r = np.abs(a @ t)
-        scale = np.median(r) + 1e-9
-        weights = 1.0 / np.maximum(1.0, r / (2.0 * scale))   # Huber-like down-weighting of outliers
-    g_u = xp * t[2] - f * t[0]
-    g_v = yp * t[2] - f * t[1]
-    if np.median(u * g_u + v * g_v) < 0:
-        t = -t
-    return t / np.linalg.norm(t)
-
-
 def inverse_depth_from_flow(flow: np.ndarray, motion: CameraMotion = CameraMotion(),
                             config: ParallaxGapConfig = ParallaxGapConfig()) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse depth ρ = |T|/Z per pixel and the mask of pixels where it was measurable.
-
-    T is the camera translation between the frames (only its direction is used, so ρ is Z's inverse in
-    units of the step length: Z = |T|/ρ), Z the depth along the optical axis.  Pixels too close to the
-    focus of expansion (|g| < ``min_g_frac``·max|g|) or with non-finite flow are NaN / invalid.
-    """
+    """Inverse depth ρ = |T|/Z per pixel and the mask of pixels where it was measurable
+    (:func:`companion.inverse_depth.inverse_depth` with the config's field of view and ``min_g_frac``)."""
     rho, valid, _ = _inverse_depth(flow, motion, config)
     return rho, valid
 
 
-def _focal_px(motion: CameraMotion, config: ParallaxGapConfig, height: int) -> float:
-    """The camera's focal length in pixels: the motion's, else from ``config.vfov_deg`` and the frame's height."""
-    return motion.focal_px or (height / 2.0) / np.tan(np.radians(config.vfov_deg) / 2.0)
-
-
 def _inverse_depth(flow: np.ndarray, motion: CameraMotion,
                    config: ParallaxGapConfig) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
-    """:func:`inverse_depth_from_flow` and the flow field g = (g_u, g_v) of unit inverse depth (F = ρ·g)."""
-    h, w = flow.shape[:2]
-    f = _focal_px(motion, config, h)
-    cx, cy = motion.principal_point or ((w - 1) / 2.0, (h - 1) / 2.0)
-    if motion.translation is None:
-        t = estimate_translation(flow, f, (cx, cy))
-    else:
-        t = np.asarray(motion.translation, dtype=np.float64)
-        t = t / (np.linalg.norm(t) + 1e-12)
-    xs, ys = _pixel_grid(h, w, cx, cy)
-    g_u = xs * t[2] - f * t[0]
-    g_v = ys * t[2] - f * t[1]
-    g2 = g_u * g_u + g_v * g_v
-    u = flow[..., 0].astype(np.float64)
-    v = flow[..., 1].astype(np.float64)
-    valid = (g2 >= (config.min_g_frac ** 2) * g2.max()) & np.isfinite(u) & np.isfinite(v)
-    rho = np.where(valid, (u * g_u + v * g_v) / np.maximum(g2, 1e-12), np.nan)
-    return rho, valid, (g_u, g_v)
-
-
-def _focus_inverse_depth(flow: np.ndarray, rho: np.ndarray, valid: np.ndarray, g: tuple[np.ndarray, np.ndarray],
-                         window_px: int) -> tuple[np.ndarray, np.ndarray]:
-    """``rho`` and ``valid`` with the pixels too near the focus of expansion (finite flow, not ``valid``) given
-    the inverse depth read from the flow's rate of expansion over a ``window_px`` square around each: F = a·p + b
-    fitted by least squares (p the pixel, a scalar a = ρ·t_z, b any vector), ρ = a / t_z.  One pixel's |g| there
-    is too small to divide by; a window's spread of pixels is not, even at the focus itself.  The focus's own place
-    drops out with b, so an error in it (the translation estimated from the flow, a rotation taken out imperfectly)
-    biases nothing: ΣF·g/Σ|g|² over the window reads a wall as farther the farther the focus is from where it was
-    estimated, a far "opening" at the focus."""
-    h, w = flow.shape[:2]
-    t_z = float(g[0][0, 1] - g[0][0, 0]) if w > 1 else 0.0     # g_u = x·t_z - f·t_x: its slope along x
-    finite = np.isfinite(flow).all(axis=-1)
-    near_focus = finite & ~valid
-    if abs(t_z) < 1e-6 or not near_focus.any():
-        return rho, valid
-    weight = finite.astype(np.float64)          # a pixel without flow counts for nothing in its windows
-    x, y = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    u = np.where(finite, flow[..., 0], 0.0).astype(np.float64)
-    v = np.where(finite, flow[..., 1], 0.0).astype(np.float64)
-
-    def window_sum(values: np.ndarray) -> np.ndarray:
-        return cv2.boxFilter(values * weight, -1, (window_px, window_px), normalize=False,
-                             borderType=cv2.BORDER_REPLICATE)
-
-    n = np.maximum(window_sum(np.ones_like(x)), 1.0)
-    sx, sy, su, sv = window_sum(x), window_sum(y), window_sum(u), window_sum(v)
-    spread = window_sum(x * x) - sx * sx / n + window_sum(y * y) - sy * sy / n
-    along = window_sum(u * x) - su * sx / n + window_sum(v * y) - sv * sy / n
-    rho, valid = rho.copy(), valid | near_focus
-    rho[near_focus] = along[near_focus] / (np.maximum(spread[near_focus], 1e-12) * t_z)
-    return rho, valid
+    """:func:`companion.inverse_depth.inverse_depth` with the config's field of view and ``min_g_frac``."""
+    return inverse_depth(flow, motion, config.vfov_deg, config.min_g_frac)
 
 
 def _otsu_split(values: np.ndarray) -> tuple[int, float]:
@@ -432,7 +323,7 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
     rho, away_from_focus, g = _inverse_depth(flow, motion, config)
     valid = away_from_focus.copy()
     if config.focus_window_px:
-        rho, valid = _focus_inverse_depth(flow, rho, valid, g, config.focus_window_px)
+        rho, valid = focus_inverse_depth(flow, rho, valid, g, config.focus_window_px)
     if config.border_px > 0:
         b = config.border_px
         for mask in (valid, away_from_focus):
@@ -494,28 +385,6 @@ def _log_image(log_values: np.ndarray, measurable: np.ndarray, config: ParallaxG
     return img, span
 
 
-def wall_plane_log(log_rho: np.ndarray, measurable: np.ndarray, focal_px: float, band: float,
-                   rounds: int = 4) -> np.ndarray | None:
-    """log ρ of the dominant plane in view (the wall), per pixel: on a plane ρ is linear in the image
-    coordinates, so it is fitted by least squares to the measurable pixels, first the nearer 70 % (what lies
-    beyond an opening or past the wall's end is farther), then ``rounds`` times to those within ``band`` (in log
-    ρ) of the last fit.  None when too little is measurable or the plane comes out behind the camera."""
-    h, w = log_rho.shape
-    ys, xs = np.mgrid[0:h, 0:w]
-    design = np.stack([(xs - (w - 1) / 2) / focal_px, (ys - (h - 1) / 2) / focal_px, np.ones((h, w))], -1)
-    rho = np.exp(np.where(measurable, log_rho, -np.inf))
-    keep = measurable & (log_rho >= np.nanpercentile(log_rho[measurable], 30)) if measurable.any() else measurable
-    for _ in range(rounds + 1):
-        if keep.sum() < 0.1 * h * w:
-            return None
-        coef, *_ = np.linalg.lstsq(design[keep], rho[keep], rcond=None)
-        plane = design @ coef
-        if not (plane > 0).all():
-            return None
-        keep = measurable & (np.abs(log_rho - np.log(plane)) <= band)
-    return np.log(plane)
-
-
 def _holes_against_wall(log_rho: np.ndarray, measurable: np.ndarray, motion: CameraMotion,
                         config: ParallaxGapConfig, a_min: float, a_max: float) -> list[np.ndarray]:
     """Holes found in the inverse depth against the wall's plane (ρ over the plane's ρ there), where the plain
@@ -526,7 +395,7 @@ def _holes_against_wall(log_rho: np.ndarray, measurable: np.ndarray, motion: Cam
     plane the wall is flat at 0, the opening below it.  Only holes clear of the image's border count: what lies
     past the wall's end is as far below the plane, and reaches the border."""
     h, w = log_rho.shape
-    plane = wall_plane_log(log_rho, measurable, _focal_px(motion, config, h), config.against_wall_band)
+    plane = wall_plane_log(log_rho, measurable, focal_px(motion, config.vfov_deg, h), config.against_wall_band)
     if plane is None:
         return []
     on_wall = measurable & (np.abs(log_rho - plane) <= config.against_wall_band)

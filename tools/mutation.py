@@ -51,7 +51,7 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "companion.tracking": (["companion/tracking.py"],
                            ["tests/companion/test_tracking.py", "tests/closed_loop/test_tracking_and_motion.py"]),
     "scenes.camera": (["scenes/camera.py"], ["tests/scenes/test_camera.py", "tests/scenes/test_groundtruth.py"]),
-    "companion.gap": (["companion/gap.py", "companion/gap_paper.py"],
+    "companion.gap": (["companion/gap.py", "companion/gap_paper.py", "companion/inverse_depth.py"],
                       ["tests/companion/test_gap.py", "tests/companion/test_gap_detail.py",
                        "tests/companion/test_gap_edges.py", "tests/companion/test_opening.py"]),
     "scenes.collision": (["scenes/collision.py"], ["tests/scenes/test_collision.py"]),

@@ -9,9 +9,9 @@ from companion.gap import (
     ParallaxGapConfig,
     clear_circle,
     detect_gap_parallax,
-    estimate_translation,
 )
 from companion.gap_paper import GapDetectorConfig, detect_gap, detect_gap_in_colour
+from companion.inverse_depth import estimate_translation
 from tests.companion.synthetic import FOCAL_320x240, iou, translation_flow
 
 H, W = 240, 320

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from companion import gap
-from companion.gap import CameraMotion, ParallaxGapConfig, wall_plane_log
+from companion.gap import CameraMotion, ParallaxGapConfig
+from companion.inverse_depth import wall_plane_log
 from tests.companion.synthetic import iou
 
 H, W, F = 120, 160, 100.0

@@ -25,12 +25,12 @@ from companion.gap import (
     _from_contour,
     _otsu_split,
     clear_circle,
-    estimate_translation,
     far_region,
     get_detector,
     inverse_depth_from_flow,
 )
 from companion.gap_paper import GapDetectorConfig, detect_gap, detect_gap_in_colour
+from companion.inverse_depth import estimate_translation
 from tests.companion.synthetic import SMALL, FOCAL_320x240, box, iou, translation_flow
 
 # Small frames keep these fast.  Pure lateral motion to the right, t = (1, 0, 0): g = (-f, 0) at every pixel,

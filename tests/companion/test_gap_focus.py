@@ -14,6 +14,7 @@ import pytest
 
 from companion import gap
 from companion.gap import CameraMotion, ParallaxGapConfig
+from companion.inverse_depth import focus_inverse_depth
 from tests.companion.synthetic import FOCAL_320x240, iou, translation_flow
 
 H, W = 240, 320
@@ -56,7 +57,7 @@ def test_the_window_reads_the_inverse_depth_at_the_focus():
     rho, valid, g = gap._inverse_depth(flow, FORWARD, ParallaxGapConfig())
     near_focus = ~valid
     assert 600 < near_focus.sum() < 1000                       # the disc, 16 px across its radius
-    filled, measurable = gap._focus_inverse_depth(flow, rho, valid, g, 9)
+    filled, measurable = focus_inverse_depth(flow, rho, valid, g, 9)
     assert measurable.all()
     assert np.allclose(filled[valid], rho[valid])              # away from the focus ρ is left as it was
     assert np.median(np.abs(filled[near_focus] / 0.05 - 1.0)) < 0.02
@@ -71,6 +72,6 @@ def test_a_focus_placed_wrong_does_not_make_the_wall_near_it_look_far():
     flow, _ = translation_flow(H, W, tuple(t), [[-20, -20], [-10, -20], [-10, -10]], rho_near=1 / 3, scale=0.1)
     flow = noisy(flow, 0)
     rho, valid, g = gap._inverse_depth(flow, FORWARD, ParallaxGapConfig())
-    filled, _ = gap._focus_inverse_depth(flow, rho, valid, g, 9)
+    filled, _ = focus_inverse_depth(flow, rho, valid, g, 9)
     ratio = filled[~valid] / (0.1 / 3)
     assert 0.85 < ratio.min() and ratio.max() < 1.15
