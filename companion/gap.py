@@ -17,7 +17,8 @@ has its far parts at the image's border set aside, as what lies past the wall's 
 With ``against_wall`` (on), where no hole is found, log ρ is split again against the wall's plane fitted to it: a
 turned wall's far side is as deep as the background seen through an opening on its near side. With ``plain_aside``
 (on), where still no hole is found, the plain regions of the first frame that reach the image's border (the empty
-space past a wall's end) are set aside and the search runs again.
+space past a wall's end) are set aside and the search runs again; in every pair, a hole most of whose pixels are
+such plain space (``plain_candidate_frac``) is dropped.
 
 Both detectors take an H×W×2 float flow (u right, v down, pixels) and return a frozen :class:`GapDetection`.
 """
@@ -198,6 +199,9 @@ class ParallaxGapConfig:
                                         # its masks inside the disc move by several pixels between near-identical
                                         # frames (a flight replayed from its logged poses, window1_brick, differed
                                         # by 10.8 px at one step); docs/perception.md
+    plain_candidate_frac: float | None = 0.5  # a hole whose outline holds more than this fraction of plain pixels
+                                        # that reach the border (the empty space past a wall's end) is no hole
+                                        # in the wall: dropped from the candidates, in every pair
     texture_min_gradient: float = 20.0  # grey Sobel magnitude (of 255) of a textured pixel ...
     texture_reach_px: int = 4           # ... and the pixels this near one (a plain patch of a textured wall
                                         # is a few pixels across; its flow is the wall's)
@@ -309,6 +313,12 @@ def _reaching_border(mask: np.ndarray) -> np.ndarray:
     return np.isin(labels, at_border[at_border > 0])
 
 
+def _plain_fraction(contour: np.ndarray, plain: np.ndarray) -> float:
+    """The fraction of the pixels inside ``contour`` (filled; a contour fills one pixel at least) that ``plain``
+    holds."""
+    return float(plain[_filled(plain.shape, contour).astype(bool)].mean())
+
+
 def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGapConfig(),
                         motion: CameraMotion = CameraMotion(), textured: np.ndarray | None = None) -> GapDetection:
     """Our detector: the farthest region of the inverse depth read from flow (see module docstring).
@@ -335,8 +345,13 @@ def detect_gap_parallax(flow: np.ndarray, config: ParallaxGapConfig = ParallaxGa
         return _no_gap((h, w), "inverse depth mostly negative (motion not translation-like)", det)
     a_min, a_max = config.area_min_frac * h * w, config.area_max_frac * h * w
     scored, reason = _hole_contours(rho, positive, motion, config, a_min, a_max)
-    if not scored and textured is not None and config.plain_aside:
-        plain = _reaching_border(~textured)
+    plain = _reaching_border(~textured) if textured is not None else None
+    if scored and plain is not None and config.plain_candidate_frac is not None:
+        in_wall = [c for c in scored if _plain_fraction(c, plain) <= config.plain_candidate_frac]
+        if not in_wall:
+            reason = "every hole found is mostly plain space reaching the frame's border (past a wall's end)"
+        scored = in_wall
+    if not scored and plain is not None and config.plain_aside:
         rest = positive & ~plain
         if plain.sum() >= a_min and rest.sum() >= a_min:    # what is left holds at least the smallest opening
             positive = rest
