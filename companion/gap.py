@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from companion.inverse_depth import CameraMotion, focal_px, focus_inverse_depth, inverse_depth, wall_plane_log
+from companion.inverse_depth import CameraMotion, focal_length_px, focus_inverse_depth, inverse_depth, wall_plane_log
 
 log = logging.getLogger(__name__)
 
@@ -410,7 +410,7 @@ def _holes_against_wall(log_rho: np.ndarray, measurable: np.ndarray, motion: Cam
     plane the wall is flat at 0, the opening below it.  Only holes clear of the image's border count: what lies
     past the wall's end is as far below the plane, and reaches the border."""
     h, w = log_rho.shape
-    plane = wall_plane_log(log_rho, measurable, focal_px(motion, config.vfov_deg, h), config.against_wall_band)
+    plane = wall_plane_log(log_rho, measurable, focal_length_px(motion, config.vfov_deg, h), config.against_wall_band)
     if plane is None:
         return []
     on_wall = measurable & (np.abs(log_rho - plane) <= config.against_wall_band)

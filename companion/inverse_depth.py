@@ -68,7 +68,7 @@ def estimate_translation(flow: np.ndarray, focal_px: float, principal_point: tup
     return t / np.linalg.norm(t)
 
 
-def focal_px(motion: CameraMotion, vfov_deg: float, height: int) -> float:
+def focal_length_px(motion: CameraMotion, vfov_deg: float, height: int) -> float:
     """The camera's focal length in pixels: the motion's, else from the vertical field of view and the frame's
     height."""
     return motion.focal_px or (height / 2.0) / np.tan(np.radians(vfov_deg) / 2.0)
@@ -84,7 +84,7 @@ def inverse_depth(flow: np.ndarray, motion: CameraMotion, vfov_deg: float,
     (|g| < ``min_g_frac``·max|g|) or with non-finite flow are NaN / invalid.  ``vfov_deg`` gives the focal length
     where ``motion`` does not."""
     h, w = flow.shape[:2]
-    f = focal_px(motion, vfov_deg, h)
+    f = focal_length_px(motion, vfov_deg, h)
     cx, cy = motion.principal_point or ((w - 1) / 2.0, (h - 1) / 2.0)
     if motion.translation is None:
         t = estimate_translation(flow, f, (cx, cy))
