@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from companion.gap import CameraMotion, GapDetection, ParallaxGapConfig, _from_contour, _inverse_depth, _within
+from companion.gap import CameraMotion, GapDetection, ParallaxGapConfig, _from_contour, _inverse_depth
+from companion.holes import within
 
 
 @dataclass(frozen=True)
@@ -51,7 +52,7 @@ def _surface_depths(mask: np.ndarray, rho: np.ndarray, measurable: np.ndarray,
     """(ρ far, ρ near): the medians inside ``mask`` and in the ring around it; None where either is short of
     pixels or the far side is not farther."""
     core = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8), iterations=config.core_px).astype(bool)
-    ring = _within(mask, config.ring_gap_px + config.ring_px) & ~_within(mask, config.ring_gap_px)
+    ring = within(mask, config.ring_gap_px + config.ring_px) & ~within(mask, config.ring_gap_px)
     inside, around = core & measurable, ring & measurable
     if inside.sum() < config.min_pixels or around.sum() < config.min_pixels:
         return None
@@ -103,7 +104,7 @@ def refine_mask(mask: np.ndarray, first_rgb: np.ndarray, second_rgb: np.ndarray,
         return mask
     m8 = mask.astype(np.uint8)
     core = cv2.erode(m8, np.ones((3, 3), np.uint8), iterations=config.band_px).astype(bool)
-    band = _within(mask, config.band_px) & ~core
+    band = within(mask, config.band_px) & ~core
     rows, cols = np.nonzero(band)
     reach = config.window_px // 2       # the window's pixels around the band's, within the frame
     h, w = mask.shape

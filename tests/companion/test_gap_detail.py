@@ -21,15 +21,13 @@ from companion.gap import (
     CameraMotion,
     GapDetection,
     ParallaxGapConfig,
-    _blend_level,
     _from_contour,
-    _otsu_split,
     clear_circle,
-    far_region,
     get_detector,
     inverse_depth_from_flow,
 )
 from companion.gap_paper import GapDetectorConfig, detect_gap, detect_gap_in_colour
+from companion.holes import _blend_level, _otsu_split, far_region
 from companion.inverse_depth import estimate_translation
 from tests.companion.synthetic import SMALL, FOCAL_320x240, box, iou, translation_flow
 

@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from companion.gap import ParallaxGapConfig, _fill_occluded, _holes, _holes_past_the_end, _within, textured_pixels
+from companion.gap import ParallaxGapConfig, textured_pixels
+from companion.holes import _holes, _holes_past_the_end, fill_occluded, within
 from tests.companion.synthetic import SMALL, box
 
 H, W = SMALL
@@ -40,7 +41,7 @@ def rings(mask: np.ndarray) -> np.ndarray:
     """Each pixel's chessboard distance from ``mask`` (0 inside), up to 20."""
     d = np.where(mask, 0, 99)
     for k in range(1, 21):
-        d[(d == 99) & _within(mask, k)] = k
+        d[(d == 99) & within(mask, k)] = k
     return d
 
 
@@ -80,13 +81,13 @@ def test_an_edge_is_texture_exactly_its_reach_either_side(falling):
 
 def test_growing_by_nothing_is_the_mask_itself():
     mask = box(10, 10, 20, 20)
-    assert _within(mask, 0) is mask
+    assert within(mask, 0) is mask
 
 
 def test_growing_a_pixel_by_two_gives_a_five_pixel_square_centred_on_it():
     mask = np.zeros((21, 21), bool)
     mask[10, 10] = True
-    grown = _within(mask, 2)
+    grown = within(mask, 2)
     assert grown.dtype == bool
     assert np.array_equal(np.argwhere(grown).min(axis=0), [8, 8]) and np.array_equal(np.argwhere(grown).max(axis=0),
                                                                                        [12, 12])
@@ -114,7 +115,7 @@ def test_the_band_the_wall_hides_is_filled_back_by_the_step_between_the_two_dept
     filled back 10 px on the side the background moved to.  The wall is read in the ring around the opening only:
     taken over the whole frame, the floor's 0.5 would make it 20 px."""
     rho = depth_by_ring({k: 0.3 for k in range(1, 7)})
-    out = _fill_occluded(outline(OPENING), rho, EVERYWHERE, G, 0.5)
+    out = fill_occluded(outline(OPENING), rho, EVERYWHERE, G, 0.5)
     assert np.array_equal(filled(out), box(20, 20, 50, 40))
 
 
@@ -124,7 +125,7 @@ def test_the_wall_is_read_in_the_ring_from_three_to_six_pixels_out():
     d = rings(OPENING)
     rho = depth_by_ring({3: 0.24, 4: 0.26, 5: 0.28})
     measurable = (d == 0) | (d == 3) | (d == 4) | (d == 5)
-    out = _fill_occluded(outline(OPENING), rho, measurable, G, 0.5)
+    out = fill_occluded(outline(OPENING), rho, measurable, G, 0.5)
     assert np.array_equal(filled(out), box(20, 20, 48, 40))
 
 
@@ -134,7 +135,7 @@ def test_the_ring_reaches_six_pixels_out_and_no_further():
     d = rings(OPENING)
     rho = depth_by_ring({6: 0.3, 7: 0.9})
     measurable = (d == 0) | (d == 6) | (d == 7)
-    out = _fill_occluded(outline(OPENING), rho, measurable, G, 0.5)
+    out = fill_occluded(outline(OPENING), rho, measurable, G, 0.5)
     assert np.array_equal(filled(out), box(20, 20, 50, 40))
 
 
@@ -150,7 +151,7 @@ def test_the_opening_is_read_two_pixels_in_from_its_outline(axis):
     rho[OPENING] = np.where(half, 0.10, 0.14)[OPENING]
     inner = box(21, 21, 39, 39)
     rho[OPENING & ~box(22, 22, 38, 38) & inner] = 0.3      # one pixel in from the outline
-    out = _fill_occluded(outline(OPENING), rho, EVERYWHERE, G, 0.5)
+    out = fill_occluded(outline(OPENING), rho, EVERYWHERE, G, 0.5)
     assert np.array_equal(filled(out), box(20, 20, 49, 40))
 
 
@@ -159,12 +160,12 @@ def test_an_opening_and_a_ring_of_twenty_measurable_pixels_each_are_enough():
     (here one row of 20 on ring 3): with exactly that, the band is filled back (5 px, then 10)."""
     small = box(20, 20, 29, 28)
     rho = np.where(small, 0.1, 0.2)
-    out = _fill_occluded(outline(small), rho, EVERYWHERE, G, 0.5)
+    out = fill_occluded(outline(small), rho, EVERYWHERE, G, 0.5)
     assert np.array_equal(filled(out), box(20, 20, 34, 28))
     ring_row = box(20, 17, 40, 18)                          # 20 px, three rows above the opening: ring 3
     assert (rings(OPENING)[ring_row] == 3).all()
     rho = depth_by_ring({k: 0.3 for k in range(1, 7)})
-    out = _fill_occluded(outline(OPENING), rho, OPENING | ring_row, G, 0.5)
+    out = fill_occluded(outline(OPENING), rho, OPENING | ring_row, G, 0.5)
     assert np.array_equal(filled(out), box(20, 20, 50, 40))
 
 
@@ -173,7 +174,7 @@ def test_with_too_few_measurable_pixels_in_the_opening_the_outline_is_kept_as_it
     the ring has."""
     small = box(20, 20, 28, 28)
     contour = outline(small)
-    assert _fill_occluded(contour, np.where(small, 0.1, 0.3), EVERYWHERE, G, 0.5) is contour
+    assert fill_occluded(contour, np.where(small, 0.1, 0.3), EVERYWHERE, G, 0.5) is contour
 
 
 @pytest.mark.parametrize("inside", [0.3, 0.32])
@@ -182,7 +183,7 @@ def test_no_band_is_filled_when_the_opening_is_not_deeper_than_the_wall(inside):
     that would move the mask the other way): the outline as it was."""
     rho = depth_by_ring({k: 0.3 for k in range(1, 7)}, inside=inside)
     contour = outline(OPENING)
-    assert _fill_occluded(contour, rho, EVERYWHERE, G, 0.5) is contour
+    assert fill_occluded(contour, rho, EVERYWHERE, G, 0.5) is contour
 
 
 def test_a_band_wider_than_the_opening_keeps_the_larger_piece():
@@ -190,7 +191,7 @@ def test_a_band_wider_than_the_opening_keeps_the_larger_piece():
     edge to 10 px; the larger piece, the opening itself, is kept."""
     narrow = box(40, 20, 55, 40)
     rho = np.where(narrow, 0.1, 0.7)
-    out = _fill_occluded(outline(narrow), rho, EVERYWHERE, G, 0.5)
+    out = fill_occluded(outline(narrow), rho, EVERYWHERE, G, 0.5)
     assert np.array_equal(filled(out), narrow)
 
 
@@ -243,7 +244,7 @@ def test_a_region_reaching_outside_the_wall_is_passed_over_and_the_next_one_take
 
 def test_a_pixel_exactly_at_the_blend_level_is_far():
     """With the blend at 0 the edge is put at the far class's own level (0 here, exactly): its pixels are far."""
-    from companion.gap import far_regions
+    from companion.holes import far_regions
 
     log_img = np.where(OPENING, 0, 200).astype(np.uint8)
     cfg = ParallaxGapConfig(edge_blend=0.0, edge_blend_reach_px=None)

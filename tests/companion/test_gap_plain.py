@@ -15,7 +15,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from companion import gap
+from companion import gap, holes
 from companion.gap import CameraMotion, ParallaxGapConfig
 from tests.companion.synthetic import iou
 
@@ -105,4 +105,4 @@ def test_the_plain_fraction_counts_every_pixel_inside_the_outline():
     square = np.array([[[10, 10]], [[29, 10]], [[29, 29]], [[10, 29]]], np.int32)
     plain = np.zeros((H, W), bool)
     plain[11:29, 11:29] = True
-    assert gap._plain_fraction(square, plain) == pytest.approx(18 * 18 / (20 * 20))
+    assert holes.plain_fraction(square, plain) == pytest.approx(18 * 18 / (20 * 20))
