@@ -51,7 +51,7 @@ from sitl_vehicle.navigator import (
     Navigator,
 )
 from sitl_vehicle.params import ParameterStore
-from sitl_vehicle.sim import AttitudeSetpoint, Setpoint
+from sitl_vehicle.sim import ManualSetpoint, Setpoint
 from sitl_vehicle.stick_modes import StickModes, stopping_point
 
 __all__ = [
@@ -105,13 +105,13 @@ ACCEPTED = Reply(mavlink.MAV_RESULT_ACCEPTED)
 @dataclass(frozen=True)
 class CommanderOutput:
     armed: bool
-    setpoint: Setpoint
+    setpoint: Setpoint | ManualSetpoint
     mode: FlightMode
 
 
 class Commander(Failsafes, Navigator, StickModes):
     """PX4-like commander/navigator for Takeoff, Hold, Land, Return, Mission (``set_mission``), Offboard, and
-    the stick modes Position, Altitude, Stabilized and Manual (``manual_control``).
+    the stick modes Position, Altitude, Stabilized, Manual and Acro (``manual_control``).
 
     ``home`` (local NED) is where the vehicle last armed on the ground, as PX4 sets it; Takeoff altitudes
     and Return are relative to it.
@@ -362,7 +362,7 @@ class Commander(Failsafes, Navigator, StickModes):
                 or (self.mode is FlightMode.AUTO_MISSION and self._mission_phase == MIS_LAND))
 
     # ---------------------------------------------------------------------------------- internals
-    def _setpoint(self, status: VehicleStatus) -> Setpoint | AttitudeSetpoint:
+    def _setpoint(self, status: VehicleStatus) -> Setpoint | ManualSetpoint:
         if self.mode is FlightMode.OFFBOARD and self._offboard_setpoint is not None:
             return self._offboard_setpoint
         if self.mode is FlightMode.AUTO_TAKEOFF and self._takeoff_target is not None:
@@ -372,7 +372,7 @@ class Commander(Failsafes, Navigator, StickModes):
         if self.mode is FlightMode.AUTO_MISSION and not self.landing and self._climb_requested():
             return Setpoint(position=self._mission_target, yaw=self._hold_yaw)
         if self.mode.manual and self._sticks is not None and (not status.landed or self._climb_requested()
-                                                              or self.mode.attitude_from_sticks):
+                                                              or self.mode.thrust_from_throttle):
             return self._stick_setpoint(status)
         if self.landing or (status.landed and not self._climb_requested()):
             # Descend (on the ground: keep pressing down, so the thrust winds down to idle).
@@ -466,7 +466,7 @@ class Commander(Failsafes, Navigator, StickModes):
             return "no offboard setpoint stream"
         if self.mode.manual and not self._manual_alive(status.time_s):
             return f"manual control lost; {self.mode.label} mode needs MANUAL_CONTROL"
-        if self.mode.attitude_from_sticks and self._sticks.throttle > ARM_THROTTLE_LOW:
+        if self.mode.thrust_from_throttle and self._sticks.throttle > ARM_THROTTLE_LOW:
             return "throttle not low; pull it down to arm"
         if self.mode.manual and self._sticks.throttle > ARM_THROTTLE_MAX:
             return "throttle above center"

@@ -1,9 +1,9 @@
 """Manual control (a joystick or RC through MAVLink MANUAL_CONTROL) for PX4's stick modes: Position, Altitude,
-Stabilized and Manual.
+Stabilized, Manual and Acro.
 
 Pure functions: the MAVLink edge turns MANUAL_CONTROL into :class:`Sticks`, the commander turns sticks into
 velocity or acceleration setpoints with :func:`shape_sticks`, :func:`stick_velocity`, :func:`stick_climb_velocity`
-and :func:`stick_acceleration`. Conventions are
+and :func:`stick_acceleration`, and into Acro's body rates with :func:`acro_rates`. Conventions are
 PX4's ``manual_control_setpoint``: pitch stick forward +, roll stick right +, yaw stick right (clockwise
 seen from above) +, throttle 0..1 with 0.5 the centre, where Position and Altitude mode hold altitude.
 """
@@ -127,3 +127,35 @@ def stick_acceleration(shaped: ShapedSticks, shape: StickShape, yaw: float) -> t
     """Altitude mode: the horizontal NED acceleration of a tilt proportional to the sticks (no position or
     velocity hold: centred sticks level the vehicle and it drifts, as PX4's Altitude mode does)."""
     return _horizontal(shaped, yaw, GRAVITY * math.tan(shape.tilt_max))
+
+
+def superexpo(value: float, expo: float, superexpo_factor: float) -> float:
+    """PX4's Acro stick curve: the expo curve (1 - e)·v + e·v³ times (1 - g)/(1 - |v|·g), which keeps 0 and ±1
+    and, as g grows, leaves the centre finer and the full stick steeper (v clamped to ±1, e to 0..1, g to
+    0..0.99)."""
+    v = max(-1.0, min(1.0, value))
+    e = max(0.0, min(1.0, expo))
+    g = max(0.0, min(0.99, superexpo_factor))
+    return ((1.0 - e) * v + e * v * v * v) * (1.0 - g) / (1.0 - abs(v) * g)
+
+
+@dataclass(frozen=True)
+class AcroShape:
+    """Acro's stick mapping (PX4 names in the comments): full stick is the rate maximum on each axis."""
+
+    roll_rate_max: float = math.radians(720.0)    # MC_ACRO_R_MAX
+    pitch_rate_max: float = math.radians(720.0)   # MC_ACRO_P_MAX
+    yaw_rate_max: float = math.radians(540.0)     # MC_ACRO_Y_MAX
+    expo: float = 0.69                            # MC_ACRO_EXPO, roll and pitch
+    expo_yaw: float = 0.69                        # MC_ACRO_EXPO_Y
+    superexpo: float = 0.7                        # MC_ACRO_SUPEXPO, roll and pitch
+    superexpo_yaw: float = 0.7                    # MC_ACRO_SUPEXPOY
+
+
+def acro_rates(sticks: Sticks, shape: AcroShape) -> tuple[float, float, float]:
+    """Acro: the body rates (roll, pitch, yaw; rad/s, FRD) the sticks ask for, through :func:`superexpo` and no
+    dead zone, as PX4's rate controller reads them: roll stick right rolls right, pitch stick forward pitches
+    the nose down, yaw stick right turns clockwise seen from above."""
+    return (superexpo(sticks.roll, shape.expo, shape.superexpo) * shape.roll_rate_max,
+            superexpo(-sticks.pitch, shape.expo, shape.superexpo) * shape.pitch_rate_max,
+            superexpo(sticks.yaw, shape.expo_yaw, shape.superexpo_yaw) * shape.yaw_rate_max)

@@ -43,6 +43,7 @@ class FlightMode(enum.Enum):
     ALTCTL = (MAIN_ALTCTL, 0, "Altitude")
     STABILIZED = (MAIN_STABILIZED, 0, "Stabilized")
     MANUAL = (MAIN_MANUAL, 0, "Manual")  # a multicopter flies Manual as Stabilized, as PX4's does
+    ACRO = (MAIN_ACRO, 0, "Acro")
 
     @property
     def custom_mode(self) -> int:
@@ -55,8 +56,8 @@ class FlightMode(enum.Enum):
 
     @property
     def manual(self) -> bool:
-        """Flown with the sticks (MANUAL_CONTROL): Position, Altitude, Stabilized and Manual."""
-        return self.value[0] in (MAIN_POSCTL, MAIN_ALTCTL, MAIN_STABILIZED, MAIN_MANUAL)
+        """Flown with the sticks (MANUAL_CONTROL): Position, Altitude, Stabilized, Manual and Acro."""
+        return self.value[0] in (MAIN_POSCTL, MAIN_ALTCTL, MAIN_STABILIZED, MAIN_MANUAL, MAIN_ACRO)
 
     @property
     def attitude_from_sticks(self) -> bool:
@@ -64,10 +65,25 @@ class FlightMode(enum.Enum):
         return self.value[0] in (MAIN_STABILIZED, MAIN_MANUAL)
 
     @property
+    def rates_from_sticks(self) -> bool:
+        """Acro: the sticks set the body rates and the throttle the thrust; centred sticks hold the attitude the
+        vehicle has, level or not."""
+        return self.value[0] == MAIN_ACRO
+
+    @property
+    def thrust_from_throttle(self) -> bool:
+        """The throttle stick sets the thrust (Stabilized, Manual and Acro): arming needs it low, and on the
+        ground the sticks are flown as they are."""
+        return self.attitude_from_sticks or self.rates_from_sticks
+
+    @property
     def base_mode_flags(self) -> int:
         """The generic base_mode flags PX4 reports for this mode (without the armed flag): manual input for
-        the stick modes, guided for those that hold position, auto for the autonomous ones."""
-        flags = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+        the stick modes, guided for those that hold position, auto for the autonomous ones; every mode but
+        Acro (rates only) stabilizes, as PX4 reports."""
+        flags = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if not self.rates_from_sticks:
+            flags |= mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
         if self.manual:
             flags |= mavlink.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
         else:
@@ -86,8 +102,8 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
 
     PX4 treats AUTO with sub mode 0 as Hold-like ready state; we map it to Hold. Position and Altitude
     and, with the attitude and thrust straight from the sticks, Stabilized and Manual are flown with
-    MANUAL_CONTROL sticks (any Position sub mode maps to plain Position); Acro (body rates from the sticks)
-    is not implemented (the README says so).
+    MANUAL_CONTROL sticks (any Position sub mode maps to plain Position), as is Acro, with the body rates
+    from the sticks.
     """
     for mode in FlightMode:
         main, sub, _ = mode.value
@@ -95,10 +111,7 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
             return mode
     if main_mode == MAIN_AUTO and sub_mode in (0, SUB_AUTO_READY):
         return FlightMode.AUTO_LOITER
-    what = f"main={main_mode} sub={sub_mode}"
-    if main_mode == MAIN_ACRO:
-        what = f"Acro ({what})"
-    raise UnsupportedMode(f"PX4 mode {what} is not supported by this vehicle; it flies "
+    raise UnsupportedMode(f"PX4 mode main={main_mode} sub={sub_mode} is not supported by this vehicle; it flies "
                           f"{', '.join(m.label for m in FlightMode)}")
 
 

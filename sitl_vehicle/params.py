@@ -121,6 +121,13 @@ COMMANDER_PARAMS = [
     ParamSpec("MPC_VEL_MANUAL", 10.0, 1.0, 20.0, "m/s", "Position mode: horizontal speed at full stick"),
     ParamSpec("MPC_MAN_Y_MAX", 150.0, 0.0, 400.0, "deg/s", "Yaw rate at full yaw stick"),
     ParamSpec("MPC_MAN_TILT_MAX", 35.0, 1.0, 85.0, "deg", "Altitude and Stabilized modes: tilt at full stick"),
+    ParamSpec("MC_ACRO_R_MAX", 720.0, 0.0, 1800.0, "deg/s", "Acro: roll rate at full stick"),
+    ParamSpec("MC_ACRO_P_MAX", 720.0, 0.0, 1800.0, "deg/s", "Acro: pitch rate at full stick"),
+    ParamSpec("MC_ACRO_Y_MAX", 540.0, 0.0, 1800.0, "deg/s", "Acro: yaw rate at full stick"),
+    ParamSpec("MC_ACRO_EXPO", 0.69, 0.0, 1.0, "-", "Acro: roll and pitch stick expo (0 linear, 1 cubic)"),
+    ParamSpec("MC_ACRO_EXPO_Y", 0.69, 0.0, 1.0, "-", "Acro: yaw stick expo (0 linear, 1 cubic)"),
+    ParamSpec("MC_ACRO_SUPEXPO", 0.7, 0.0, 0.95, "-", "Acro: roll and pitch SuperExpo (0 plain expo)"),
+    ParamSpec("MC_ACRO_SUPEXPOY", 0.7, 0.0, 0.95, "-", "Acro: yaw SuperExpo (0 plain expo)"),
     ParamSpec("SYS_AUTOSTART", 4001.0, 0.0, 1e6, "", "Airframe id (4001: generic quadrotor X)"),
 ]
 

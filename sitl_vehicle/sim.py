@@ -19,7 +19,8 @@ Setpoints (:class:`Setpoint`, NaN = axis not controlled):
 
 :class:`AttitudeSetpoint` (Stabilized flight from the sticks) bypasses position and velocity control: roll
 and pitch angles, a yaw rate, and a throttle mapped to collective thrust as PX4 does (stick centre = hover
-thrust).
+thrust). :class:`RateSetpoint` (Acro) bypasses the attitude loop too: body rates straight to the rate loop and
+the collective thrust as it is.
 
 Crash (collision or hard ground impact): motors stop, the vehicle disarms, ``crashed`` latches.
 """
@@ -46,7 +47,8 @@ from sitl_vehicle.trajectory import PlannerConfig, TrapezoidPlanner, VelocitySle
 from sitl_vehicle.wind import WindConfig, WindModel
 
 __all__ = [
-    "AIRFRAMES", "Airframe", "AttitudeSetpoint", "ControlConfig", "PlannerConfig", "SensorNoise", "Setpoint",
+    "AIRFRAMES", "Airframe", "AttitudeSetpoint", "ControlConfig", "PlannerConfig", "RateSetpoint", "SensorNoise",
+    "Setpoint",
     "VehicleConfig", "VehicleSim", "VehicleState", "CollisionWorld", "GroundOnly", "GRAVITY",
 ]
 
@@ -76,6 +78,20 @@ class AttitudeSetpoint:
     pitch: float = 0.0
     yaw_rate: float = 0.0
     throttle: float = 0.0
+
+
+@dataclass(frozen=True)
+class RateSetpoint:
+    """Acro flight: body rates (rad/s, FRD) and the collective thrust (0..1 of full), as PX4's rate controller
+    takes them from the sticks (the throttle is the thrust: no hover centre)."""
+
+    roll_rate: float = 0.0
+    pitch_rate: float = 0.0
+    yaw_rate: float = 0.0
+    thrust: float = 0.0
+
+
+ManualSetpoint = AttitudeSetpoint | RateSetpoint
 
 
 def throttle_to_thrust(throttle: float, hover: float, thrust_min: float, thrust_max: float) -> float:
@@ -140,7 +156,7 @@ class VehicleSim:
         self._apply_control_config(config.control)
         self.armed = False
         self.motor_command = (0.0, 0.0, 0.0, 0.0)
-        self._setpoint: Setpoint | AttitudeSetpoint | None = None
+        self._setpoint: Setpoint | ManualSetpoint | None = None
         self._yaw_sp = float(initial_yaw)
         self._q_sp = self.dyn.attitude
         self._thrust_sp = 0.0
@@ -252,7 +268,7 @@ class VehicleSim:
         return self._ref
 
     @property
-    def setpoint(self) -> Setpoint | AttitudeSetpoint | None:
+    def setpoint(self) -> Setpoint | ManualSetpoint | None:
         return self._setpoint
 
     # ------------------------------------------------------------------ commands
@@ -268,14 +284,16 @@ class VehicleSim:
         elif not armed:
             self.armed = False
 
-    def set_setpoint(self, sp: Setpoint | AttitudeSetpoint) -> None:
-        if isinstance(sp, AttitudeSetpoint):
-            if not isinstance(self._setpoint, AttitudeSetpoint):
+    def set_setpoint(self, sp: Setpoint | ManualSetpoint) -> None:
+        if isinstance(sp, ManualSetpoint):
+            if type(self._setpoint) is not type(sp):
                 self.planner.clear()
                 self.slew.reset()
+                if isinstance(self._setpoint, RateSetpoint):  # out of Acro: hold the heading it left the vehicle at
+                    self._yaw_sp = yaw_from_quat(self.estimate.attitude)
             self._setpoint = sp
             return
-        if isinstance(self._setpoint, AttitudeSetpoint):
+        if isinstance(self._setpoint, ManualSetpoint):
             self._setpoint = None  # back to position control: plan from the state, not from a stale reference
             self._yaw_sp = yaw_from_quat(self.estimate.attitude)
         self._apply_setpoint(sp, fresh=False)
@@ -361,7 +379,11 @@ class VehicleSim:
                     q = est.q
                 else:
                     q = dyn.attitude
-                self._rate_sp = self.att_ctl.update(q, self._q_sp, self._yaw_rate_ff)
+                sp = self._setpoint
+                if isinstance(sp, RateSetpoint):    # Acro: the sticks' rates go to the rate loop as they are
+                    self._rate_sp = (sp.roll_rate, sp.pitch_rate, sp.yaw_rate)
+                else:
+                    self._rate_sp = self.att_ctl.update(q, self._q_sp, self._yaw_rate_ff)
             omega = est.omega if est is not None else dyn.angular_velocity
             landed = dyn.on_ground
             if landed:
@@ -396,6 +418,10 @@ class VehicleSim:
         dtp = self._pos_dt
         if isinstance(sp, AttitudeSetpoint):
             self._stabilized(sp, dtp)
+            return
+        if isinstance(sp, RateSetpoint):
+            self._thrust_sp = min(max(sp.thrust, 0.0), 1.0)
+            self._ref = (NAN3, NAN3, NAN3)
             return
         est = self.estimator
         dyn = self.dyn

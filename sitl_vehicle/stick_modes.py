@@ -1,8 +1,9 @@
-"""The stick modes' setpoints: Position, Altitude, Stabilized and Manual flown from MANUAL_CONTROL.
+"""The stick modes' setpoints: Position, Altitude, Stabilized, Manual and Acro flown from MANUAL_CONTROL.
 
 :class:`StickModes` is a mixin of :class:`sitl_vehicle.commander.Commander` (it reads the commander's sticks,
 parameters and mode and keeps what centred sticks hold): the sticks shaped by the MPC_* parameters
-(:mod:`sitl_vehicle.manual`) become a velocity, acceleration or attitude setpoint, and a centred stick holds
+(:mod:`sitl_vehicle.manual`) become a velocity, acceleration, attitude or (Acro, by the MC_ACRO_* parameters)
+body-rate setpoint, and a centred stick holds
 the altitude, heading or position where the vehicle stops (:func:`stopping_point`, which Hold uses too). Apart
 from the commander because it is what the pilot flies, not what the commander decides.
 """
@@ -13,16 +14,18 @@ import math
 from typing import TYPE_CHECKING
 
 from sitl_vehicle.manual import (
+    AcroShape,
     ShapedSticks,
     Sticks,
     StickShape,
+    acro_rates,
     shape_sticks,
     stick_acceleration,
     stick_climb_velocity,
     stick_velocity,
 )
 from sitl_vehicle.modes import FlightMode
-from sitl_vehicle.sim import AttitudeSetpoint, Setpoint
+from sitl_vehicle.sim import AttitudeSetpoint, ManualSetpoint, RateSetpoint, Setpoint
 
 if TYPE_CHECKING:
     from sitl_vehicle.commander import VehicleStatus
@@ -42,13 +45,25 @@ class StickModes:
                           yaw_rate_max=math.radians(p["MPC_MAN_Y_MAX"]), tilt_max=math.radians(p["MPC_MAN_TILT_MAX"]),
                           **optional)
 
+    def _acro_shape(self) -> AcroShape:
+        p = self.params
+        return AcroShape(roll_rate_max=math.radians(p["MC_ACRO_R_MAX"]),
+                         pitch_rate_max=math.radians(p["MC_ACRO_P_MAX"]),
+                         yaw_rate_max=math.radians(p["MC_ACRO_Y_MAX"]), expo=p["MC_ACRO_EXPO"],
+                         expo_yaw=p["MC_ACRO_EXPO_Y"], superexpo=p["MC_ACRO_SUPEXPO"],
+                         superexpo_yaw=p["MC_ACRO_SUPEXPOY"])
+
     def _shaped_sticks(self) -> ShapedSticks:
         return shape_sticks(self._sticks or Sticks(), self._stick_shape())
 
-    def _stick_setpoint(self, status: VehicleStatus) -> Setpoint | AttitudeSetpoint:
-        """The sticks' setpoint. Stabilized/Manual: roll and pitch angles up to MPC_MAN_TILT_MAX, a yaw rate and
-        the throttle as they are. Position/Altitude: a centred stick holds what it controls: the altitude
-        (throttle), the heading (yaw) and, in Position mode, the position where the vehicle stops."""
+    def _stick_setpoint(self, status: VehicleStatus) -> Setpoint | ManualSetpoint:
+        """The sticks' setpoint. Acro: body rates up to MC_ACRO_*_MAX and the throttle as the thrust.
+        Stabilized/Manual: roll and pitch angles up to MPC_MAN_TILT_MAX, a yaw rate and the throttle as they are.
+        Position/Altitude: a centred stick holds what it controls: the altitude (throttle), the heading (yaw)
+        and, in Position mode, the position where the vehicle stops."""
+        if self.mode.rates_from_sticks:
+            roll_rate, pitch_rate, yaw_rate = acro_rates(self._sticks, self._acro_shape())
+            return RateSetpoint(roll_rate, pitch_rate, yaw_rate, thrust=self._sticks.throttle)
         shape = self._stick_shape()
         sticks = shape_sticks(self._sticks, shape)
         if self.mode.attitude_from_sticks:  # forward stick pitches the nose down (negative pitch, FRD)

@@ -65,7 +65,7 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
                               ["tests/sitl_vehicle/test_dynamics.py", "tests/sitl_vehicle/test_wind.py"]),
     "sitl_vehicle.commander": ([f"sitl_vehicle/{m}.py" for m in ("commander", "failsafes", "navigator", "stick_modes")],
                                [f"tests/sitl_vehicle/test_{t}.py" for t in ("commander", "takeoff", "mission",
-                                                                            "manual")]),
+                                                                            "manual", "acro")]),
 }
 
 STAGING_PYPROJECT = """\

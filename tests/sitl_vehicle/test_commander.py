@@ -265,13 +265,13 @@ def test_px4_mode_encoding_matches_pymavlink():
         main, sub = decode_custom_mode(mode.custom_mode)
         assert mode_from_custom(main, sub) is mode
     names = {FlightMode.AUTO_TAKEOFF: "TAKEOFF", FlightMode.AUTO_LOITER: "LOITER", FlightMode.AUTO_LAND: "LAND",
-             FlightMode.AUTO_RTL: "RTL", FlightMode.OFFBOARD: "OFFBOARD"}
+             FlightMode.AUTO_RTL: "RTL", FlightMode.OFFBOARD: "OFFBOARD", FlightMode.ACRO: "ACRO"}
     for mode, name in names.items():
         assert mavutil.interpret_px4_mode(mode.base_mode_flags, mode.custom_mode) == name
         base, main, sub = mavutil.px4_map[name]
         assert mode_from_custom(main, sub) is mode
     with pytest.raises(UnsupportedMode):
-        mode_from_custom(5, 0)  # Acro is not flown
+        mode_from_custom(8, 0)  # Rattitude, which PX4 has since removed, is not flown
 
 
 def test_parameter_store_checks_names_and_ranges():

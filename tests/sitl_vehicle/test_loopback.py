@@ -366,13 +366,19 @@ def test_malformed_manual_control_is_rejected_with_statustext(make_vehicle):
     assert client.set_mode("POSCTL").result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED  # none was used
 
 
-def test_stabilized_mode_flies_on_the_throttle_and_position_mode_catches_it(make_vehicle):
+def armed_with_sticks_in(make_vehicle, mode: str):
+    """A vehicle armed on the ground in the stick mode ``mode``, the throttle low, the sticks streaming."""
     server, client = make_vehicle(params=(("COM_RC_LOSS_T", 1.5),))
     client.stream_sticks(z=0)
     wait_streamed(client, 6)
-    assert client.set_mode("STABILIZED").result == mavlink.MAV_RESULT_ACCEPTED
-    assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "STABILIZED") is not None
+    assert client.set_mode(mode).result == mavlink.MAV_RESULT_ACCEPTED
+    assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == mode) is not None
     assert client.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1).result == mavlink.MAV_RESULT_ACCEPTED
+    return server, client
+
+
+def test_stabilized_mode_flies_on_the_throttle_and_position_mode_catches_it(make_vehicle):
+    server, client = armed_with_sticks_in(make_vehicle, "STABILIZED")
     client.stream_sticks(z=650)  # above hover thrust: climbs, with nothing holding the altitude
     assert client.recv("LOCAL_POSITION_NED", 10, lambda m: m.z < -1.5) is not None, "did not climb"
     client.stream_sticks()       # centred sticks in Position mode hold where the vehicle stops
@@ -381,6 +387,28 @@ def test_stabilized_mode_flies_on_the_throttle_and_position_mode_catches_it(make
     z = server.sim.truth.position[2]
     wait_sim(server, 2.0)
     assert abs(server.sim.truth.position[2] - z) < 0.1
+    assert client.command(mavlink.MAV_CMD_NAV_LAND).result == mavlink.MAV_RESULT_ACCEPTED
+    assert wait_until(lambda: not server.sim.armed, 30) and not server.sim.crashed
+    client.stop_stream()
+
+
+def test_acro_mode_flies_body_rates_from_the_sticks_and_holds_a_bank(make_vehicle):
+    """Acro over MAVLink as a ground station flies it: the throttle is the thrust, a roll stick rolls at a rate,
+    and centred sticks stop the rotation with the vehicle still banked (nothing levels it); Position mode
+    catches it."""
+    server, client = armed_with_sticks_in(make_vehicle, "ACRO")
+    client.stream_sticks(z=600)  # 60 % thrust, above the 50 % hover: climbs
+    assert client.recv("LOCAL_POSITION_NED", 10, lambda m: m.z < -1.5) is not None, "did not climb"
+    client.stream_sticks(y=400, z=520)
+    assert client.recv("ATTITUDE", 5, lambda m: m.rollspeed > 0.5) is not None, "did not roll"
+    client.stream_sticks(z=520)
+    banked = client.recv("ATTITUDE", 5, lambda m: abs(m.rollspeed) < 0.05 and m.roll > 0.05)
+    assert banked is not None, "the roll did not stop with the vehicle banked"
+    wait_sim(server, 0.3)
+    assert server.sim.truth.euler()[0] > 0.05                      # still banked: Acro does not level
+    client.stream_sticks()
+    assert client.set_mode("POSCTL").result == mavlink.MAV_RESULT_ACCEPTED
+    assert client.recv("LOCAL_POSITION_NED", 15, lambda m: abs(m.vy) < 0.05 and abs(m.vz) < 0.05) is not None
     assert client.command(mavlink.MAV_CMD_NAV_LAND).result == mavlink.MAV_RESULT_ACCEPTED
     assert wait_until(lambda: not server.sim.armed, 30) and not server.sim.crashed
     client.stop_stream()
