@@ -21,6 +21,14 @@ the first ``min_estimates`` estimates, as :class:`companion.opening.OpeningTrack
 mask's clear radius against the rendered truth's (pixels), the judgement over the truth, and how many impassable
 openings were judged to fit and passable ones too small.
 
+Each pair also reads the wall's thickness from the reveal, the opening's inner faces between the wall's front face
+and the back edge that bounds what is seen through it (measured here, not flown): just outside the mask the inverse
+depth falls below the wall's plane toward d/(d+t).  ``reveal_ratio`` is the median of ρ over the plane's ρ in the
+ring ``REVEAL_RING_PX`` outside the mask, over its median in the rings ``REVEAL_PLATEAU_PX`` out, and the summary
+fits t = a + b·d·(1/ratio - 1) to the run's pairs (d the first frame's distance) and gives its error left out a
+scene at a time, against the world's own spread and the 0.15 m the companion assumes; ``--reveal-fit A B`` tries
+a fit from another run (another seed) instead.
+
 Outputs (in ``-o/--out``): ``size_error.json`` (``rows``: one per pair; ``scenes``: one per scene; ``summary``)
 and ``size_error.md``.
 
@@ -129,6 +137,70 @@ def judge_scene(pairs: list[dict], tracker_config, servo_config) -> dict | None:
             "passable": truth >= need, "judged_fit": judged >= need}
 
 
+REVEAL_RING_PX = 2                 # the ring just outside the mask where the reveal is read ...
+REVEAL_PLATEAU_PX = (11, 15)       # ... against these rings, on the wall's plane beyond the reveal
+
+
+def reveal_ratio(flow: np.ndarray, mask: np.ndarray, focal_px: float) -> float | None:
+    """The inverse depth just outside an opening's ``mask`` over the wall plane's there, relative to the same ratio
+    on the wall further out (see the module docstring); None without a plane or enough measurable pixels."""
+    import cv2
+
+    from companion.gap import CameraMotion, inverse_depth_from_flow
+    from companion.inverse_depth import wall_plane_log
+
+    rho, valid = inverse_depth_from_flow(flow, CameraMotion(focal_px=focal_px))
+    measurable = valid & (rho > 0)
+    log_rho = np.log(np.where(measurable, rho, np.nan))
+    plane = wall_plane_log(log_rho, measurable, focal_px, band=0.15)
+    if plane is None:
+        return None
+    ratio = np.exp(log_rho - plane)
+    m = mask.astype(np.uint8)
+
+    def grown(px: int) -> np.ndarray:
+        return cv2.dilate(m, np.ones((2 * px + 1, 2 * px + 1), np.uint8)).astype(bool)
+
+    ring = grown(REVEAL_RING_PX) & ~grown(REVEAL_RING_PX - 1) & measurable
+    plateau = grown(REVEAL_PLATEAU_PX[1]) & ~grown(REVEAL_PLATEAU_PX[0] - 1) & measurable
+    if ring.sum() < 10 or plateau.sum() < 10:
+        return None
+    return float(np.median(ratio[ring]) / np.median(ratio[plateau]))
+
+
+def reveal_feature(row: dict) -> float:
+    """d·(1/ratio - 1): the wall's thickness a sharp reveal would give at the first frame's distance d."""
+    return row["distance_m"] * (1.0 / row["reveal_ratio"] - 1.0)
+
+
+def thickness_from_reveal(rows: list[dict], assumed_m: float, fit: tuple[float, float] | None = None) -> dict | None:
+    """How well the reveal gives the wall's thickness over ``rows`` (pairs with a ``reveal_ratio``): t = a + b·x
+    (x = :func:`reveal_feature`) fitted to them and its error left out a scene at a time, or, with ``fit`` (a, b)
+    from another run, that fit's error; against the spread of the walls' thickness and the error of
+    ``assumed_m``.  None with pairs from fewer than three scenes."""
+    rows = [r for r in rows if r.get("reveal_ratio")]
+    scenes = np.array([r["scene"] for r in rows])
+    if len(set(scenes.tolist())) < 3:
+        return None
+    x = np.array([reveal_feature(r) for r in rows])
+    t = np.array([r["thickness_m"] for r in rows])
+    design = np.column_stack([np.ones_like(x), x])
+    if fit is None:
+        coef = np.linalg.lstsq(design, t, rcond=None)[0]
+        errors = np.empty_like(t)
+        for scene in set(scenes.tolist()):
+            out = scenes == scene
+            left = np.linalg.lstsq(design[~out], t[~out], rcond=None)[0]
+            errors[out] = t[out] - design[out] @ left
+    else:
+        coef = np.asarray(fit, float)
+        errors = t - design @ coef
+    return {"pairs": len(rows), "scenes": len(set(scenes.tolist())), "fit": [float(c) for c in coef],
+            "fitted_here": fit is None, "error_sd_m": float(np.std(errors)), "bias_m": float(np.mean(errors)),
+            "world_sd_m": float(np.std(t)), "assumed_m": assumed_m,
+            "assumed_rms_m": float(np.sqrt(np.mean((t - assumed_m) ** 2)))}
+
+
 def _percentiles(values) -> dict | None:
     values = np.asarray(values, float)
     if values.size == 0:
@@ -137,9 +209,11 @@ def _percentiles(values) -> dict | None:
             "p90": float(np.percentile(values, 90)), "n": int(values.size)}
 
 
-def summarise(rows: list[dict], scenes: list[dict], turned_deg: float) -> dict:
+def summarise(rows: list[dict], scenes: list[dict], turned_deg: float, assumed_thickness_m: float = 0.15,
+              reveal_fit: tuple[float, float] | None = None) -> dict:
     """Mask error (px) over the pairs, the judgement over the truth over the scenes (all, facing, turned more
-    than ``turned_deg``) and the misjudged counts."""
+    than ``turned_deg``), the misjudged counts and the wall's thickness from the reveal
+    (:func:`thickness_from_reveal`)."""
     found = [r for r in rows if r["mask_radius_px"] is not None]
     facing = [s for s in scenes if abs(s["turn_deg"]) <= turned_deg]
     turned = [s for s in scenes if abs(s["turn_deg"]) > turned_deg]
@@ -153,6 +227,7 @@ def summarise(rows: list[dict], scenes: list[dict], turned_deg: float) -> dict:
         "impassable_judged_fit": sum(not s["passable"] and s["judged_fit"] for s in scenes),
         "passable": sum(s["passable"] for s in scenes),
         "passable_judged_too_small": sum(s["passable"] and not s["judged_fit"] for s in scenes),
+        "thickness_from_reveal": thickness_from_reveal(rows, assumed_thickness_m, reveal_fit),
     }
 
 
@@ -169,6 +244,14 @@ def markdown(summary: dict, flow: str, seed: int) -> str:
         lines.append(f"| judged clear radius / truth, {group} | {cell(p)} |")
     lines += ["", f"Impassable judged to fit: {summary['impassable_judged_fit']}/{summary['impassable']}; "
                   f"passable judged too small: {summary['passable_judged_too_small']}/{summary['passable']}."]
+    reveal = summary.get("thickness_from_reveal")
+    if reveal:
+        a, b = reveal["fit"]
+        how = "left out a scene at a time" if reveal["fitted_here"] else "with the fit given"
+        lines += ["", f"Wall thickness from the reveal (t = {a:.3f} + {b:.3f}·d(1/ratio - 1), {reveal['pairs']} pairs "
+                      f"of {reveal['scenes']} scenes): off by {reveal['error_sd_m']:.3f} m (sd) {how}, bias "
+                      f"{reveal['bias_m']:+.3f} m; the walls' own spread {reveal['world_sd_m']:.3f} m, the assumed "
+                      f"{reveal['assumed_m']:.2f} m off by {reveal['assumed_rms_m']:.3f} m (rms)."]
     return "\n".join(lines) + "\n"
 
 
@@ -210,23 +293,25 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     for _ in range(args.pairs):
         (pose0, att0), (pose1, att1), distance = pair_poses(spec, centre, rng, args.distance, args.motion)
         first, second = render_splats(cloud, camera, pose0), render_splats(cloud, camera, pose1)
-        detection = perceive(first.rgb, second.rgb, att0, att1, camera.K, backend, detector,
-                             edges=edges_for(args.edges)).detection
+        seen = perceive(first.rgb, second.rgb, att0, att1, camera.K, backend, detector, edges=edges_for(args.edges))
+        detection = seen.detection
         truth = gt_mask(cloud, camera, pose0, first)
         n_labels, labels = cv2.connectedComponents(truth.astype(np.uint8))
         truth_px = max((clear_circle(labels == k)[1] for k in range(1, n_labels)), default=0.0)
         found = [c for c in (detection.candidates or (detection,)) if c.found]
-        estimate = radius_px = None
+        estimate = radius_px = reveal = None
         if found:
             widest = max(found, key=lambda c: c.clear_radius_px)
             stretch = (turned_wall_stretch(need, distance, turn, servo.wall_thickness_m)
                        if abs(turn) > TURN_NEGLIGIBLE_RAD else 1.0)
             radius_px = widest.clear_radius_px
             estimate = tracker.clear_radius_m(in_wall(widest.mask, stretch)[1], distance, focal)
+            reveal = reveal_ratio(seen.flow, widest.mask, focal)
         rows.append({"scene": index, "distance_m": distance, "step_m": float(np.linalg.norm(
                          np.subtract(pose1.position, pose0.position))), "turn_deg": spec.start_yaw_deg,
                      "thickness_m": spec.wall.thickness, "shape": spec.openings[0].shape, "truth_m": truth_m,
-                     "truth_radius_px": truth_px, "mask_radius_px": radius_px, "estimate_m": estimate})
+                     "truth_radius_px": truth_px, "mask_radius_px": radius_px, "estimate_m": estimate,
+                     "reveal_ratio": reveal})
     return rows, judge_scene(rows, tracker.config, servo)
 
 
@@ -236,6 +321,7 @@ def main(argv: list[str] | None = None) -> int:
     from companion.edges import EDGE_MODES
     from companion.flow.base import FlowError
     from companion.flow.registry import DEFAULT_FLOW, make_flow_backend
+    from companion.servo import ServoConfig
     from scenes import PinholeCamera
 
     parser = argparse.ArgumentParser(prog="python -m tools.size_error", description=__doc__.split("\n\n")[0],
@@ -255,6 +341,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="openings' edges read again from the frames, as flown (photo), or the detector's masks")
     parser.add_argument("--turned", type=float, default=3.0, metavar="DEG",
                         help="walls turned more than this count as turned in the summary")
+    parser.add_argument("--reveal-fit", type=float, nargs=2, metavar=("A", "B"),
+                        help="try the thickness fit t = A + B·d(1/ratio - 1) from another run on this one's pairs "
+                             "(default: fit it here, left out a scene at a time)")
     parser.add_argument("-o", "--out", type=Path, default=Path("runs/size_error"), help="output folder")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
@@ -277,7 +366,8 @@ def main(argv: list[str] | None = None) -> int:
         rows += pairs
         if judged is not None:
             scenes.append({"scene": index, **judged})
-    summary = summarise(rows, scenes, args.turned)
+    summary = summarise(rows, scenes, args.turned, ServoConfig().wall_thickness_m,
+                        tuple(args.reveal_fit) if args.reveal_fit else None)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "size_error.json").write_text(json.dumps({"flow": args.flow, "edges": args.edges, "seed": args.seed,
                                                           "summary": summary, "scenes": scenes, "rows": rows},

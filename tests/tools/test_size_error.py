@@ -100,6 +100,7 @@ def test_a_run_renders_the_truth_where_the_geometry_puts_it(tmp_path):
                             "-o", str(tmp_path)]) == 0
     out = json.loads((tmp_path / "size_error.json").read_text())
     assert (tmp_path / "size_error.md").is_file()
+    assert all("reveal_ratio" in row for row in out["rows"])
     near = [r for r in out["rows"] if abs(r["turn_deg"]) < 10.0]   # (a turned wall's far edge is nearer on one side)
     assert len(near) >= 2
     focal = 156.4
@@ -129,3 +130,58 @@ def test_a_pair_steps_toward_the_wall_or_across_the_heading(motion):
             assert 0.12 <= along <= 0.22 and np.linalg.norm(step - along * heading) < 0.08
         else:
             assert abs(along) < 0.04 and 0.12 - 0.05 < abs(step[0] * heading[1] - step[1] * heading[0]) < 0.22 + 0.05
+
+
+# ------------------------------------------------------------------------------------ the reveal's thickness
+
+def _reveal_row(scene: int, distance: float, thickness: float, blur: float = 1.0) -> dict:
+    """A pair whose reveal reads ρ at d/(d + blur·t) of the wall plane's: a sharp reveal with blur 1."""
+    return {"scene": scene, "distance_m": distance, "thickness_m": thickness,
+            "reveal_ratio": distance / (distance + blur * thickness)}
+
+
+def test_a_sharp_reveal_gives_the_thickness_exactly_and_a_blurred_one_by_its_fit():
+    rows = [_reveal_row(k, d, t) for k, (d, t) in enumerate([(1.0, 0.10), (1.2, 0.15), (0.9, 0.22), (1.4, 0.25)])]
+    sharp = size_error.thickness_from_reveal(rows, 0.15)
+    assert sharp["fit"] == pytest.approx([0.0, 1.0], abs=1e-9) and sharp["error_sd_m"] == pytest.approx(0.0, abs=1e-9)
+    assert sharp["world_sd_m"] == pytest.approx(np.std([0.10, 0.15, 0.22, 0.25]))
+    assert sharp["assumed_rms_m"] == pytest.approx(np.sqrt(np.mean(np.square([-0.05, 0.0, 0.07, 0.10]))))
+    blurred = [_reveal_row(k, d, t, blur=0.5) for k, (d, t) in enumerate([(1.0, 0.10), (1.1, 0.15), (1.2, 0.22)])]
+    assert size_error.thickness_from_reveal(blurred, 0.15)["fit"] == pytest.approx([0.0, 2.0], abs=1e-9)
+    given = size_error.thickness_from_reveal(blurred, 0.15, fit=(0.0, 1.0))
+    assert not given["fitted_here"] and given["bias_m"] == pytest.approx(np.mean([0.05, 0.075, 0.11]))
+
+
+def test_the_reveal_fit_is_judged_on_scenes_it_never_saw():
+    """Left out a scene at a time: a scene alone off the line costs its own error and moves the fit for the
+    others; pairs without a reading, and runs of under three scenes, give nothing."""
+    rows = [_reveal_row(k, 1.0 + 0.1 * k, 0.1 + 0.03 * k) for k in range(5)] + [_reveal_row(5, 1.1, 0.3, blur=0.6)]
+    result = size_error.thickness_from_reveal(rows + [{"scene": 6, "distance_m": 1.0, "thickness_m": 0.2,
+                                                       "reveal_ratio": None}], 0.15)
+    assert result["pairs"] == 6 and result["scenes"] == 6 and result["error_sd_m"] > 0.01
+    assert size_error.thickness_from_reveal(rows[:2], 0.15) is None
+
+
+def test_the_reveal_ratio_reads_the_ring_just_outside_the_mask_against_the_wall_further_out():
+    """A lateral step past a wall (ρ 0.5) with a hole (ρ 0.2) whose reveal, the 3 px round it, reads 0.8 of the
+    wall: the ratio is 0.8; with no reveal, 1."""
+    h, w, focal = 120, 160, 100.0
+    hole = np.zeros((h, w), bool)
+    hole[40:80, 60:100] = True
+    reveal = np.zeros((h, w), bool)
+    reveal[37:83, 57:103] = True
+    reveal &= ~hole
+    for reveal_rho, expected in ((0.4, 0.8), (0.5, 1.0)):
+        rho = np.where(hole, 0.2, np.where(reveal, reveal_rho, 0.5))
+        flow = np.zeros((h, w, 2), np.float32)
+        flow[..., 0] = -rho * focal
+        assert size_error.reveal_ratio(flow, hole, focal) == pytest.approx(expected, rel=0.01)
+    assert size_error.reveal_ratio(np.zeros((h, w, 2), np.float32), hole, focal) is None   # no flow, no plane
+
+
+def test_the_report_gives_the_reveal_s_thickness_error():
+    rows = [_reveal_row(k, 1.0 + 0.1 * k, 0.1 + 0.03 * k) for k in range(4)]
+    summary = size_error.summarise([{**r, "mask_radius_px": None, "truth_radius_px": 20.0} for r in rows], [],
+                                   turned_deg=3.0)
+    assert summary["thickness_from_reveal"]["scenes"] == 4
+    assert "Wall thickness from the reveal" in size_error.markdown(summary, "raft", 1)
