@@ -26,6 +26,7 @@ from sitl_vehicle.failsafes import (
     DLL_STOP_MOTORS,
     FAIL_ACT_T_MIN,
     FAILSAFE_SEVERITY,
+    GF_NONE,
     LOSS_EXCEPTION_BIT,
     OBL_ACTION_LAND,
     OBL_ACTION_RETURN,
@@ -34,6 +35,7 @@ from sitl_vehicle.failsafes import (
     STICK_MOVE_WINDOW_S,
     Failsafes,
 )
+from sitl_vehicle.geofence import Geofence
 from sitl_vehicle.manual import Sticks
 from sitl_vehicle.mission import MissionItem
 from sitl_vehicle.modes import FlightMode
@@ -161,6 +163,8 @@ class Commander(Failsafes, Navigator, StickModes):
         self._mission_target: tuple[float, float, float] = (NAN, NAN, NAN)
         self._mission_since = 0.0
         self._mission_complete = False
+        self.geofence = Geofence()
+        self._geofence_breached = False  # the geofence failsafe acted on this breach already
 
     # ----------------------------------------------------------------------------------- requests
     def arm(self, status: VehicleStatus, force: bool = False) -> Reply:
@@ -335,6 +339,8 @@ class Commander(Failsafes, Navigator, StickModes):
         if self._gcs_lost and self.armed and not status.landed and not (
                 self._gcs_failsafe_done or self.mode is FlightMode.AUTO_LAND or self._loss_excepted("COM_DLL_EXCEPT")):
             self._data_link_failsafe(status)
+        if int(self.params["GF_ACTION"]) != GF_NONE:
+            self._check_geofence(status)
         if self._delayed_failsafe is not None and self.armed and now >= self._delayed_failsafe[1]:
             self._delayed_failsafe_due(status)
         if self._sticks_moved:
@@ -415,11 +421,7 @@ class Commander(Failsafes, Navigator, StickModes):
             self._stick_hold_xy = self._stick_hold_z = None  # set from the state when the sticks are centred
             self._stick_yawing = False
         elif mode is FlightMode.AUTO_RTL:
-            self._rtl_leg = RTL_CLIMB
-            self._rtl_start_xy = status.position[:2]
-            self._rtl_z = min(status.position[2], self.home[2] - self.params["RTL_RETURN_ALT"])  # NED: up is -z
-            self._say(mavlink.MAV_SEVERITY_INFO, f"Return: flying home at {self.home[2] - self._rtl_z:.1f} m "
-                                                 "above home")
+            self._begin_return(status)
 
     def _mission_item_reached(self, status: VehicleStatus) -> None:
         self.mission_reached.append(self.mission_seq)
@@ -460,6 +462,9 @@ class Commander(Failsafes, Navigator, StickModes):
             return "vehicle is not landed"
         if self.mode in (FlightMode.AUTO_LAND, FlightMode.AUTO_RTL):
             return f"{self.mode.label} mode is not armable; switch to Hold or Offboard"
+        outside = self._geofence_breach(status, home=status.position)    # home is set where it arms
+        if outside and int(self.params["GF_ACTION"]) != GF_NONE:
+            return f"vehicle outside the geofence ({outside})"
         if self.mode is FlightMode.AUTO_MISSION and not self.mission:
             return "no mission"
         if self.mode is FlightMode.OFFBOARD and not self._offboard_alive(status.time_s):

@@ -1,10 +1,11 @@
-"""Link-loss failsafes and the pilot's stick takeover, as PX4's commander acts on them.
+"""Link-loss and geofence failsafes and the pilot's stick takeover, as PX4's commander acts on them.
 
 :class:`Failsafes` is a mixin of :class:`sitl_vehicle.commander.Commander` (it reads and sets the commander's
 state and calls its ``_enter``, ``_disarm`` and ``_say``): what the loss of the offboard stream, of manual
 control or of the ground station's link does (COM_OBL_RC_ACT, NAV_RCL_ACT, NAV_DLL_ACT, their exceptions and
-COM_FAIL_ACT_T's delay in Hold), and when moving the sticks takes over (COM_RC_OVERRIDE). Apart from the
-commander because it is the part that acts on what was lost rather than on what was asked.
+COM_FAIL_ACT_T's delay in Hold), what leaving the geofence does (GF_ACTION), and when moving the sticks takes over
+(COM_RC_OVERRIDE). Apart from the commander because it is the part that acts on what went wrong rather than on what
+was asked.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_vehicle.geofence import Geofence
 from sitl_vehicle.manual import Sticks
 from sitl_vehicle.modes import FlightMode
 
@@ -34,6 +36,9 @@ LOSS_EXCEPTION_BIT = {FlightMode.AUTO_MISSION: 1, FlightMode.AUTO_LOITER: 2, Fli
                       FlightMode.AUTO_LAND: 2, FlightMode.AUTO_RTL: 2, FlightMode.OFFBOARD: 4}
 # PX4 ranks failsafe actions so that of two at once the worse wins: Hold < Return < Land
 FAILSAFE_SEVERITY = {FlightMode.AUTO_LOITER: 0, FlightMode.AUTO_RTL: 1, FlightMode.AUTO_LAND: 2}
+# GF_ACTION (PX4): 0 none, 1 warning, 2 Hold, 3 Return, 4 terminate (here: the motors stopped), 5 Land
+GF_ACTIONS = {2: FlightMode.AUTO_LOITER, 3: FlightMode.AUTO_RTL, 5: FlightMode.AUTO_LAND}
+GF_NONE, GF_WARNING, GF_TERMINATE = 0, 1, 4
 # COM_FAIL_ACT_T at or below this acts at once, as PX4 does
 FAIL_ACT_T_MIN = 0.1
 # COM_RC_OVERRIDE bits: moving the sticks takes over (switches to Position) in the auto modes, in Offboard
@@ -136,6 +141,40 @@ class Failsafes:
             return
         self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {target.label}")
         self._enter(target, status)
+
+    def set_geofence(self, geofence: Geofence) -> None:
+        """A new fence (uploaded whole; an empty one clears it)."""
+        self.geofence = geofence
+        self._geofence_breached = False
+
+    def _geofence_breach(self, status: VehicleStatus, home: tuple[float, float, float] | None = None) -> str | None:
+        """Why the vehicle is outside the fence and its limits from ``home`` (default: the commander's), or None."""
+        return self.geofence.breach(status.position, self.home if home is None else home,
+                                    self.params["GF_MAX_HOR_DIST"], self.params["GF_MAX_VER_DIST"])
+
+    def _check_geofence(self, status: VehicleStatus) -> None:
+        """PX4's geofence failsafe: leaving the fence in the air does what GF_ACTION says, once, until the vehicle
+        is back inside (a Hold holds where it stopped; the pilot may choose a mode or take over with the sticks)."""
+        why = self._geofence_breach(status) if self.armed and not status.landed else None
+        if why is None or self._geofence_breached:
+            self._geofence_breached = why is not None
+            return
+        self._geofence_breached = True
+        action = int(self.params["GF_ACTION"])
+        text = f"Geofence breached: {why}"
+        if action == GF_TERMINATE:
+            self._disarm(f"{text}: flight terminated, motors stopped")
+        elif action in GF_ACTIONS:
+            self.failsafe = True
+            self._failsafe_stick_takeover = True
+            target = _hold_if_landed(GF_ACTIONS[action], status)
+            if target is self.mode or (target is FlightMode.AUTO_RTL and self.mode is FlightMode.AUTO_LAND):
+                self._say(mavlink.MAV_SEVERITY_CRITICAL, f"{text}, continuing {self.mode.label}")
+            else:
+                self._say(mavlink.MAV_SEVERITY_CRITICAL, f"{text}, switching to {target.label}")
+                self._enter(target, status)
+        elif action == GF_WARNING:
+            self._say(mavlink.MAV_SEVERITY_CRITICAL, text)
 
     def _delayed_failsafe_due(self, status: VehicleStatus) -> None:
         """COM_FAIL_ACT_T is over and no mode was chosen meanwhile: the failsafe's action, even if the link

@@ -39,10 +39,9 @@ class MissionError(ValueError):
 
 
 @dataclass(frozen=True)
-class MissionItem:
-    """One checked item. ``lat``/``lon`` (deg) and ``alt`` (m) are as sent, for download; ``north``/``east``
-    are the local position (NaN: where the vehicle is, for a Takeoff or Land without coordinates);
-    ``alt_relative`` says whether ``alt`` is above home (else above mean sea level, ``amsl_down`` locally)."""
+class PlanItem:
+    """One checked item of an uploaded plan (a mission's, a geofence's). ``lat``/``lon`` (deg) and ``alt`` (m)
+    are as sent, for download; ``north``/``east`` are the local position."""
 
     seq: int
     command: int
@@ -53,6 +52,14 @@ class MissionItem:
     alt: float
     north: float
     east: float
+
+
+@dataclass(frozen=True)
+class MissionItem(PlanItem):
+    """One checked mission item (``north``/``east`` NaN: where the vehicle is, for a Takeoff or Land without
+    coordinates); ``alt_relative`` says whether ``alt`` is above home (else above mean sea level, ``amsl_down``
+    locally)."""
+
     alt_relative: bool
     amsl_down: float  # for an altitude above mean sea level: its local down coordinate
     autocontinue: bool = True

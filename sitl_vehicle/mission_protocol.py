@@ -3,8 +3,10 @@
 :class:`MissionProtocol` holds the ``_on_mission_*`` handlers of ``sitl_vehicle.mavlink_io.MavlinkVehicleInterface``
 (a mixin: they use its ``commander``, ``home``, ``status_fn``, ``statustext``, ``_for_me`` and ``_upload``). An
 upload is requested item by item and handed to the commander whole once every item was read
-(:func:`sitl_vehicle.mission.mission_item_from_message`); only plans of type MISSION are kept. Apart from the rest
-of the protocol because it is a conversation of its own, with its own state: the upload under way.
+(:func:`sitl_vehicle.mission.mission_item_from_message`, or for a plan of type FENCE
+:func:`sitl_vehicle.geofence.fence_item_from_message` and :func:`~sitl_vehicle.geofence.geofence_from_items`); plans
+of type MISSION and FENCE are kept, not rally points. Apart from the rest of the protocol because it is a
+conversation of its own, with its own state: the upload under way.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import logging
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_vehicle.geofence import FENCE, FenceItem, Geofence, fence_item_from_message, geofence_from_items
 from sitl_vehicle.mission import MAX_ITEMS, MissionError, MissionItem, mission_item_from_message
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.udp_link import UdpLink
@@ -29,15 +32,16 @@ class MissionProtocol:
                                                       mission_type))
 
     def _mission_type_ok(self, msg, link: UdpLink, reply: bool = True) -> bool:
-        """Only plans of type MISSION are kept (no geofence or rally points): uploading others is refused
-        clearly (their lists read as empty, and clearing them succeeds)."""
+        """Plans of type MISSION and FENCE are kept, not rally points: uploading those is refused clearly (their
+        list reads as empty, and clearing it succeeds)."""
         mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
-        if mission_type == mavlink.MAV_MISSION_TYPE_MISSION:
+        if mission_type in (mavlink.MAV_MISSION_TYPE_MISSION, FENCE):
             return True
         if reply:
             self._mission_ack(link, msg, mavlink.MAV_MISSION_UNSUPPORTED, mission_type)
-            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Mission type {mission_type} (geofence or rally points) "
-                                                          "is not supported: only missions", link)
+            self.statustext(mavlink.MAV_SEVERITY_WARNING,
+                            f"Mission type {mission_type} is not supported: send missions (0) or geofences (1); rally "
+                            "points (2) are not kept", link)
         return False
 
     def _mission_current(self):
@@ -55,50 +59,63 @@ class MissionProtocol:
     def _on_mission_count(self, msg, link: UdpLink) -> None:
         if not self._for_me(msg) or not self._mission_type_ok(msg, link):
             return
+        mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
         if msg.count > MAX_ITEMS:
-            self._mission_ack(link, msg, mavlink.MAV_MISSION_NO_SPACE)
-            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Mission of {msg.count} items refused: at most "
-                                                          f"{MAX_ITEMS}", link)
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_NO_SPACE, mission_type)
+            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"{_plan(mission_type)} of {msg.count} items refused: "
+                                                          f"at most {MAX_ITEMS}", link)
             return
         if msg.count == 0:
             self._upload = None
-            self.commander.set_mission([], self.status_fn())
-            self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
+            self._keep(mission_type, [])
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, mission_type)
             return
-        self._upload = {"link": link, "count": msg.count, "items": []}  # a new COUNT restarts any upload
-        self._request_item(link, msg, 0)
+        # a new COUNT restarts any upload
+        self._upload = {"link": link, "count": msg.count, "items": [], "type": mission_type}
+        self._request_item(link, msg, 0, mission_type)
 
-    def _request_item(self, link: UdpLink, msg, seq: int) -> None:
+    def _keep(self, mission_type: int, items: list) -> None:
+        """Hand an uploaded plan to the commander (raises MissionError for a fence whose items make no zones)."""
+        if mission_type == FENCE:
+            self.commander.set_geofence(geofence_from_items(items) if items else Geofence())
+        else:
+            self.commander.set_mission(items, self.status_fn())
+
+    def _request_item(self, link: UdpLink, msg, seq: int, mission_type: int) -> None:
         link.send(mavlink.MAVLink_mission_request_int_message(msg.get_srcSystem(), msg.get_srcComponent(), seq,
-                                                              mavlink.MAV_MISSION_TYPE_MISSION))
+                                                              mission_type))
 
     def _on_mission_item_int(self, msg, link: UdpLink) -> None:
         if not self._for_me(msg) or not self._mission_type_ok(msg, link, reply=False):
             return
         upload = self._upload
-        if upload is None or upload["link"] is not link:
-            self._mission_ack(link, msg, mavlink.MAV_MISSION_DENIED)  # no upload under way: send MISSION_COUNT
+        mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        if upload is None or upload["link"] is not link or upload["type"] != mission_type:
+            # no upload of this plan under way: send MISSION_COUNT first
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_DENIED, mission_type)
             return
         expected = len(upload["items"])
         if msg.seq != expected:  # a repeat or a gap: ask again for the one we need
-            self._request_item(link, msg, expected)
+            self._request_item(link, msg, expected, mission_type)
             return
+        read = fence_item_from_message if mission_type == FENCE else mission_item_from_message
         try:
-            item = mission_item_from_message(msg, self.home.to_local)
+            upload["items"].append(read(msg, self.home.to_local))
+            if len(upload["items"]) == upload["count"]:
+                self._upload = None
+                self._keep(mission_type, upload["items"])
         except MissionError as exc:
             self._upload = None
-            log.warning("mission upload refused: %s", exc)
-            self._mission_ack(link, msg, exc.result)
-            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Mission refused: {exc}", link)
+            log.warning("%s upload refused: %s", _plan(mission_type).lower(), exc)
+            self._mission_ack(link, msg, exc.result, mission_type)
+            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"{_plan(mission_type)} refused: {exc}", link)
             return
-        upload["items"].append(item)
         if len(upload["items"]) < upload["count"]:
-            self._request_item(link, msg, expected + 1)
+            self._request_item(link, msg, expected + 1, mission_type)
             return
-        self._upload = None
-        self.commander.set_mission(upload["items"], self.status_fn())
-        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED)
-        self.statustext(mavlink.MAV_SEVERITY_INFO, f"Mission accepted: {len(upload['items'])} items", link)
+        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, mission_type)
+        self.statustext(mavlink.MAV_SEVERITY_INFO, f"{_plan(mission_type)} accepted: {len(upload['items'])} items",
+                        link)
 
     _on_mission_item = _on_mission_item_int  # the older float form (lat/lon in degrees) is read the same way
 
@@ -106,20 +123,28 @@ class MissionProtocol:
         if not self._for_me(msg):
             return
         mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
-        count = len(self.commander.mission) if mission_type == mavlink.MAV_MISSION_TYPE_MISSION else 0  # no fence
+        count = {mavlink.MAV_MISSION_TYPE_MISSION: len(self.commander.mission),
+                 FENCE: len(self.commander.geofence.items)}.get(mission_type, 0)      # no rally points
         link.send(mavlink.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), count,
                                                         mission_type))
 
     def _on_mission_request_int(self, msg, link: UdpLink) -> None:
         if not self._for_me(msg) or not self._mission_type_ok(msg, link):
             return
-        mission: tuple[MissionItem, ...] = self.commander.mission
-        if not 0 <= msg.seq < len(mission):
-            self._mission_ack(link, msg, mavlink.MAV_MISSION_INVALID_SEQUENCE)
+        mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
+        fence = mission_type == FENCE
+        plan: tuple[MissionItem, ...] | tuple[FenceItem, ...] = (self.commander.geofence.items if fence
+                                                                 else self.commander.mission)
+        if not 0 <= msg.seq < len(plan):
+            self._mission_ack(link, msg, mavlink.MAV_MISSION_INVALID_SEQUENCE, mission_type)
             return
         # the float MISSION_REQUEST is answered in its own form, MISSION_ITEM, as the mission protocol says
-        link.send(mission[msg.seq].to_message(msg.seq == self.commander.mission_seq, msg.get_srcSystem(),
-                                              msg.get_srcComponent(), int_form=msg.get_type() != "MISSION_REQUEST"))
+        int_form = msg.get_type() != "MISSION_REQUEST"
+        if fence:
+            link.send(plan[msg.seq].to_message(msg.get_srcSystem(), msg.get_srcComponent(), int_form))
+        else:
+            link.send(plan[msg.seq].to_message(msg.seq == self.commander.mission_seq, msg.get_srcSystem(),
+                                               msg.get_srcComponent(), int_form=int_form))
 
     _on_mission_request = _on_mission_request_int
 
@@ -130,9 +155,17 @@ class MissionProtocol:
         if mission_type in (mavlink.MAV_MISSION_TYPE_MISSION, mavlink.MAV_MISSION_TYPE_ALL):
             self._upload = None
             self.commander.set_mission([], self.status_fn())
-        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, mission_type)  # no geofence or rally to clear
+        if mission_type in (FENCE, mavlink.MAV_MISSION_TYPE_ALL):
+            self._upload = None
+            self.commander.set_geofence(Geofence())
+        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, mission_type)  # no rally points to clear
 
     def _on_mission_set_current(self, msg, link: UdpLink) -> None:
         if self._for_me(msg):
             if self.commander.set_mission_current(msg.seq, self.status_fn()).accepted:  # else it says why
                 link.send(self._mission_current())
+
+
+def _plan(mission_type: int) -> str:
+    """What a plan of ``mission_type`` is called in the vehicle's messages."""
+    return "Geofence" if mission_type == FENCE else "Mission"

@@ -30,6 +30,17 @@ MIS_CLIMB, MIS_FLY, MIS_HOLD, MIS_LAND, MIS_DONE = "climb", "fly", "hold", "land
 class Navigator:
     """Return's legs and a mission's items, mixed into ``Commander``."""
 
+    def _begin_return(self, status: VehicleStatus) -> None:
+        """Return's first leg: climb where the vehicle is to RTL_RETURN_ALT above home (never down), and no higher
+        than a metre under the geofence's ceiling (GF_MAX_VER_DIST), as PX4's Return keeps inside the fence."""
+        self._rtl_leg = RTL_CLIMB
+        self._rtl_start_xy = status.position[:2]
+        climb = self.params["RTL_RETURN_ALT"]
+        if self.params["GF_MAX_VER_DIST"] > 0:
+            climb = min(climb, max(self.params["GF_MAX_VER_DIST"] - 1.0, 0.0))
+        self._rtl_z = min(status.position[2], self.home[2] - climb)  # NED: up is -z
+        self._say(mavlink.MAV_SEVERITY_INFO, f"Return: flying home at {self.home[2] - self._rtl_z:.1f} m above home")
+
     def _descend_z(self) -> float:
         return max(self._rtl_z, self.home[2] - self.params["RTL_DESCEND_ALT"])  # descending never climbs
 

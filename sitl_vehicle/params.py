@@ -93,6 +93,10 @@ COMMANDER_PARAMS = [
     ParamSpec("NAV_DLL_ACT", 0.0, 0.0, 6.0, "enum", "Ground-station link loss action: 0 = none, 1 = Hold, "
               "2 = Return, 3 = Land, 5/6 = stop the motors (terminate/disarm)"),
     ParamSpec("COM_DL_LOSS_T", 10.0, 1.0, 300.0, "s", "Ground-station heartbeat timeout before the link is lost"),
+    ParamSpec("GF_ACTION", 2.0, 0.0, 5.0, "enum", "Geofence breach action: 0 = none, 1 = warning, 2 = Hold, "
+              "3 = Return, 4 = terminate (motors stopped), 5 = Land"),
+    ParamSpec("GF_MAX_HOR_DIST", 0.0, 0.0, 10000.0, "m", "Geofence: largest distance from home (0: no limit)"),
+    ParamSpec("GF_MAX_VER_DIST", 0.0, 0.0, 10000.0, "m", "Geofence: largest height above home (0: no limit)"),
     ParamSpec("COM_DLL_EXCEPT", 0.0, 0.0, 7.0, "bitmask", "Modes where ground-station link loss is only "
               "reported: 1 Mission, 2 Hold/Takeoff/Land/Return, 4 Offboard (it never acts in Land)"),
     ParamSpec("RTL_RETURN_ALT", 60.0, 0.0, 150.0, "m", "Return: climb to at least this altitude above home"),

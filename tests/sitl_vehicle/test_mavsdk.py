@@ -157,6 +157,31 @@ def test_mavsdk_mission_upload_download_fly_and_land(px4_system):
     assert _near(server.sim.truth.position, (0.0, 2.0, 0.0), 0.15) and not server.sim.crashed
 
 
+def test_mavsdk_geofence_upload_download_and_clear(px4_system):
+    """MAVSDK's Geofence plugin: an inclusion polygon and an exclusion circle go up as a plan of type FENCE, come
+    back as they were sent, and are cleared."""
+    from mavsdk.plugins.geofence import Circle, FenceType, Geofence, GeofenceData, Point, Polygon
+
+    server, system = px4_system
+    home, geofence = server.config.home, Geofence(system)
+
+    def point(north, east):
+        lat, lon, _ = home.to_global((north, east, 0.0))
+        return Point(latitude_deg=lat, longitude_deg=lon)
+
+    square = Polygon(points=[point(-5, -5), point(-5, 5), point(5, 5), point(5, -5)], fence_type=FenceType.INCLUSION)
+    keep_out = Circle(point=point(2, 2), radius=1.0, fence_type=FenceType.EXCLUSION)
+    geofence.upload_geofence(GeofenceData(polygons=[square], circles=[keep_out]))
+    fence = server.commander.geofence
+    assert len(fence.items) == 5 and [z.inclusion for z in fence.zones] == [True, False]
+    back = geofence.download_geofence()
+    assert len(back.polygons) == 1 and len(back.polygons[0].points) == 4 and len(back.circles) == 1
+    assert abs(back.circles[0].radius - 1.0) < 1e-6 and back.circles[0].fence_type == FenceType.EXCLUSION
+    assert abs(back.polygons[0].points[2].latitude_deg - square.points[2].latitude_deg) < 1e-6
+    geofence.clear_geofence()
+    assert server.commander.geofence.items == ()
+
+
 def _near(position, target, tol) -> bool:
     if hasattr(position, "north_m"):
         position = (position.north_m, position.east_m, position.down_m)

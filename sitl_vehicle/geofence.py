@@ -1,0 +1,153 @@
+"""Geofence: PX4's inclusion and exclusion zones and its limits from home, checked against where the vehicle is.
+
+Pure: the MAVLink edge turns each item of a plan of type FENCE (MISSION_ITEM_INT with ``mission_type`` 1, as
+MAVSDK's Geofence plugin and QGroundControl upload it) into a :class:`FenceItem` with :func:`fence_item_from_message`
+(which raises :class:`sitl_vehicle.mission.MissionError` carrying the MAV_MISSION_RESULT and the reason), and
+:func:`geofence_from_items` groups the items into zones: polygons (``MAV_CMD_NAV_FENCE_POLYGON_VERTEX_*``, one item
+per vertex, param1 the vertex count) and circles (``MAV_CMD_NAV_FENCE_CIRCLE_*``, param1 the radius), each inclusion
+or exclusion, and PX4's return point (``MAV_CMD_NAV_FENCE_RETURN_POINT``, kept for download). Positions are
+converted to local NED at upload. As PX4 reads a fence, the vehicle is inside when it is in at least one inclusion
+zone (if there are any) and in no exclusion zone; GF_MAX_HOR_DIST and GF_MAX_VER_DIST (0: off) bound its distance
+from home and its height above home.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_vehicle.mission import AMSL_FRAMES, MAX_DISTANCE_M, MAX_ITEMS, RELATIVE_FRAMES, MissionError, PlanItem
+
+POLYGON_INCLUSION = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+POLYGON_EXCLUSION = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+CIRCLE_INCLUSION = mavlink.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION
+CIRCLE_EXCLUSION = mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+RETURN_POINT = mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT
+FENCE_COMMANDS = {POLYGON_INCLUSION: "NAV_FENCE_POLYGON_VERTEX_INCLUSION",
+                  POLYGON_EXCLUSION: "NAV_FENCE_POLYGON_VERTEX_EXCLUSION",
+                  CIRCLE_INCLUSION: "NAV_FENCE_CIRCLE_INCLUSION", CIRCLE_EXCLUSION: "NAV_FENCE_CIRCLE_EXCLUSION",
+                  RETURN_POINT: "NAV_FENCE_RETURN_POINT"}
+FENCE = mavlink.MAV_MISSION_TYPE_FENCE
+
+
+@dataclass(frozen=True)
+class FenceItem(PlanItem):
+    """One checked fence item: as sent (for download) and its local position."""
+
+    def to_message(self, target_system: int, target_component: int, int_form: bool = True):
+        """MISSION_ITEM_INT of a plan of type FENCE (or the older float MISSION_ITEM)."""
+        if int_form:
+            return mavlink.MAVLink_mission_item_int_message(
+                target_system, target_component, self.seq, self.frame, self.command, 0, 1, *self.params,
+                int(round(self.lat * 1e7)), int(round(self.lon * 1e7)), self.alt, FENCE)
+        return mavlink.MAVLink_mission_item_message(
+            target_system, target_component, self.seq, self.frame, self.command, 0, 1, *self.params, self.lat,
+            self.lon, self.alt, FENCE)
+
+
+def fence_item_from_message(msg, to_local) -> FenceItem:
+    """MISSION_ITEM_INT (or MISSION_ITEM) of a FENCE plan -> FenceItem; ``to_local(lat, lon, alt_amsl)`` -> local
+    (north, east, down).  Raises MissionError naming the item, what is wrong and what to send instead."""
+    where = f"fence item {msg.seq}"
+    if msg.command not in FENCE_COMMANDS:
+        raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED,
+                           f"{where}: command {msg.command} is no fence item; use "
+                           + ", ".join(f"{name} ({cmd})" for cmd, name in FENCE_COMMANDS.items()))
+    frames = RELATIVE_FRAMES + AMSL_FRAMES
+    if msg.frame not in frames:
+        raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED_FRAME,
+                           f"{where}: frame {msg.frame} is not supported; use MAV_FRAME_GLOBAL_INT (5) or "
+                           "MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
+    scale = 1e-7 if msg.get_type() == "MISSION_ITEM_INT" else 1.0
+    lat, lon = msg.x * scale, msg.y * scale
+    params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))
+    if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0.0 and lon == 0.0):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X, f"{where}: needs a latitude and longitude")
+    if msg.command in (CIRCLE_INCLUSION, CIRCLE_EXCLUSION) and not (math.isfinite(params[0]) and params[0] > 0):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
+                           f"{where}: a circle's radius (param1) is {params[0]}; send it in metres, above 0")
+    if msg.command in (POLYGON_INCLUSION, POLYGON_EXCLUSION) and not (
+            math.isfinite(params[0]) and params[0] >= 3 and params[0] == int(params[0])):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
+                           f"{where}: a polygon's vertex count (param1) is {params[0]}; send 3 or more")
+    north, east, _ = to_local(lat, lon, 0.0)
+    if math.hypot(north, east) > MAX_DISTANCE_M:
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
+                           f"{where}: {lat:.7f}, {lon:.7f} is {math.hypot(north, east) / 1000:.0f} km from home; "
+                           "send coordinates near home")
+    return FenceItem(msg.seq, msg.command, msg.frame, params, lat, lon, float(msg.z), north, east)
+
+
+@dataclass(frozen=True)
+class Zone:
+    """An inclusion or exclusion zone in local NED: a polygon's (north, east) vertices, or a circle."""
+
+    inclusion: bool
+    vertices: tuple[tuple[float, float], ...] = ()
+    centre: tuple[float, float] = (0.0, 0.0)
+    radius: float = 0.0
+
+    def contains(self, north: float, east: float) -> bool:
+        if not self.vertices:
+            return math.hypot(north - self.centre[0], east - self.centre[1]) <= self.radius
+        inside = False      # even-odd rule: a ray east from the point crosses the outline an odd number of times
+        n = len(self.vertices)
+        for i in range(n):
+            (n0, e0), (n1, e1) = self.vertices[i], self.vertices[(i + 1) % n]
+            if (n0 > north) != (n1 > north) and east < e0 + (north - n0) * (e1 - e0) / (n1 - n0):
+                inside = not inside
+        return inside
+
+
+@dataclass(frozen=True)
+class Geofence:
+    """The uploaded fence: its items as sent and the zones they make."""
+
+    items: tuple[FenceItem, ...] = ()
+    zones: tuple[Zone, ...] = ()
+
+    def breach(self, position: tuple[float, float, float], home: tuple[float, float, float],
+               max_horizontal_m: float = 0.0, max_vertical_m: float = 0.0) -> str | None:
+        """Why ``position`` (local NED) is outside the fence, or None: more than ``max_horizontal_m`` from
+        ``home`` or ``max_vertical_m`` above it (0: no limit), outside every inclusion zone, or in an exclusion
+        zone."""
+        north, east, down = position
+        away = math.hypot(north - home[0], east - home[1])
+        if max_horizontal_m > 0 and away > max_horizontal_m:
+            return f"{away:.0f} m from home, over GF_MAX_HOR_DIST {max_horizontal_m:g} m"
+        height = home[2] - down
+        if max_vertical_m > 0 and height > max_vertical_m:
+            return f"{height:.0f} m above home, over GF_MAX_VER_DIST {max_vertical_m:g} m"
+        inclusions = [z for z in self.zones if z.inclusion]
+        if inclusions and not any(z.contains(north, east) for z in inclusions):
+            return "outside the geofence's inclusion zones"
+        if any(z.contains(north, east) for z in self.zones if not z.inclusion):
+            return "inside a geofence exclusion zone"
+        return None
+
+
+def geofence_from_items(items: list[FenceItem]) -> Geofence:
+    """The zones of a FENCE plan's items, in order: each polygon is as many consecutive vertex items of one kind as
+    their param1 says.  Raises MissionError for a polygon cut short or a plan over MAX_ITEMS items."""
+    if len(items) > MAX_ITEMS:
+        raise MissionError(mavlink.MAV_MISSION_NO_SPACE, f"a fence of {len(items)} items: at most {MAX_ITEMS}")
+    zones, i = [], 0
+    while i < len(items):
+        item = items[i]
+        if item.command in (CIRCLE_INCLUSION, CIRCLE_EXCLUSION):
+            zones.append(Zone(item.command == CIRCLE_INCLUSION, centre=(item.north, item.east), radius=item.params[0]))
+            i += 1
+        elif item.command in (POLYGON_INCLUSION, POLYGON_EXCLUSION):
+            count = int(item.params[0])
+            vertices = items[i:i + count]
+            if len(vertices) < count or any(v.command != item.command or v.params[0] != count for v in vertices):
+                raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
+                                   f"fence item {item.seq}: a polygon of {count} vertices needs {count} consecutive "
+                                   f"{FENCE_COMMANDS[item.command]} items with param1 {count}")
+            zones.append(Zone(item.command == POLYGON_INCLUSION, vertices=tuple((v.north, v.east) for v in vertices)))
+            i += count
+        else:           # the return point: kept for download, not a zone
+            i += 1
+    return Geofence(tuple(items), tuple(zones))
