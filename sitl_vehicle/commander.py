@@ -35,7 +35,7 @@ from sitl_vehicle.failsafes import (
     STICK_MOVE_WINDOW_S,
     Failsafes,
 )
-from sitl_vehicle.geofence import Geofence
+from sitl_vehicle.geofence import Geofence, RallyItem
 from sitl_vehicle.manual import Sticks
 from sitl_vehicle.mission import MissionItem
 from sitl_vehicle.modes import FlightMode
@@ -165,6 +165,9 @@ class Commander(Failsafes, Navigator, StickModes):
         self._mission_complete = False
         self.geofence = Geofence()
         self._geofence_breached = False  # the geofence failsafe acted on this breach already
+        self.rally_points: tuple[RallyItem, ...] = ()
+        self._rtl_destination = (0.0, 0.0)  # where Return flies: home or a rally point (its index; None: home)
+        self._rtl_rally: int | None = None
 
     # ----------------------------------------------------------------------------------- requests
     def arm(self, status: VehicleStatus, force: bool = False) -> Reply:

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.geofence import Geofence
+from sitl_vehicle.geofence import Geofence, RallyItem
 from sitl_vehicle.manual import Sticks
 from sitl_vehicle.modes import FlightMode
 
@@ -141,6 +141,10 @@ class Failsafes:
             return
         self._say(mavlink.MAV_SEVERITY_CRITICAL, f"Failsafe: {lost} lost, switching to {target.label}")
         self._enter(target, status)
+
+    def set_rally_points(self, points: list[RallyItem]) -> None:
+        """New rally points (uploaded whole; none clears them): a Return started from now on may fly to one."""
+        self.rally_points = tuple(points)
 
     def set_geofence(self, geofence: Geofence) -> None:
         """A new fence (uploaded whole; an empty one clears it)."""

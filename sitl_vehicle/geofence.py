@@ -1,4 +1,5 @@
-"""Geofence: PX4's inclusion and exclusion zones and its limits from home, checked against where the vehicle is.
+"""Geofence and rally points: PX4's inclusion and exclusion zones and its limits from home, checked against where
+the vehicle is, and the safe points a Return may fly to instead of home.
 
 Pure: the MAVLink edge turns each item of a plan of type FENCE (MISSION_ITEM_INT with ``mission_type`` 1, as
 MAVSDK's Geofence plugin and QGroundControl upload it) into a :class:`FenceItem` with :func:`fence_item_from_message`
@@ -8,13 +9,16 @@ per vertex, param1 the vertex count) and circles (``MAV_CMD_NAV_FENCE_CIRCLE_*``
 or exclusion, and PX4's return point (``MAV_CMD_NAV_FENCE_RETURN_POINT``, kept for download). Positions are
 converted to local NED at upload. As PX4 reads a fence, the vehicle is inside when it is in at least one inclusion
 zone (if there are any) and in no exclusion zone; GF_MAX_HOR_DIST and GF_MAX_VER_DIST (0: off) bound its distance
-from home and its height above home.
+from home and its height above home. Rally points (``MAV_CMD_NAV_RALLY_POINT`` items of a plan of type RALLY) are
+read by :func:`rally_item_from_message`; :func:`nearest_safe_point` picks where a Return goes, as PX4's default
+RTL_TYPE 0 does: home or the nearest rally point, whichever is nearer.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
@@ -30,21 +34,77 @@ FENCE_COMMANDS = {POLYGON_INCLUSION: "NAV_FENCE_POLYGON_VERTEX_INCLUSION",
                   CIRCLE_INCLUSION: "NAV_FENCE_CIRCLE_INCLUSION", CIRCLE_EXCLUSION: "NAV_FENCE_CIRCLE_EXCLUSION",
                   RETURN_POINT: "NAV_FENCE_RETURN_POINT"}
 FENCE = mavlink.MAV_MISSION_TYPE_FENCE
+RALLY = mavlink.MAV_MISSION_TYPE_RALLY
+RALLY_POINT = mavlink.MAV_CMD_NAV_RALLY_POINT
 
 
 @dataclass(frozen=True)
-class FenceItem(PlanItem):
-    """One checked fence item: as sent (for download) and its local position."""
+class PlacedItem(PlanItem):
+    """An item of a plan of places (a fence's, the rally points'), sent back as it came in."""
+
+    MISSION_TYPE: ClassVar[int]
 
     def to_message(self, target_system: int, target_component: int, int_form: bool = True):
-        """MISSION_ITEM_INT of a plan of type FENCE (or the older float MISSION_ITEM)."""
+        """MISSION_ITEM_INT of the item's plan (or the older float MISSION_ITEM)."""
         if int_form:
             return mavlink.MAVLink_mission_item_int_message(
                 target_system, target_component, self.seq, self.frame, self.command, 0, 1, *self.params,
-                int(round(self.lat * 1e7)), int(round(self.lon * 1e7)), self.alt, FENCE)
+                int(round(self.lat * 1e7)), int(round(self.lon * 1e7)), self.alt, self.MISSION_TYPE)
         return mavlink.MAVLink_mission_item_message(
             target_system, target_component, self.seq, self.frame, self.command, 0, 1, *self.params, self.lat,
-            self.lon, self.alt, FENCE)
+            self.lon, self.alt, self.MISSION_TYPE)
+
+
+@dataclass(frozen=True)
+class FenceItem(PlacedItem):
+    """One checked fence item: as sent (for download) and its local position."""
+
+    MISSION_TYPE: ClassVar[int] = FENCE
+
+
+@dataclass(frozen=True)
+class RallyItem(PlacedItem):
+    """One checked rally point: as sent (for download) and its local position."""
+
+    MISSION_TYPE: ClassVar[int] = RALLY
+
+
+def _placed(msg, where: str, to_local) -> tuple[float, float, float, float]:
+    """(lat, lon, north, east) of an item that must have a place near home, in a global frame; raises MissionError
+    naming the item, what is wrong and what to send instead."""
+    if msg.frame not in RELATIVE_FRAMES + AMSL_FRAMES:
+        raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED_FRAME,
+                           f"{where}: frame {msg.frame} is not supported; use MAV_FRAME_GLOBAL_INT (5) or "
+                           "MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
+    scale = 1e-7 if msg.get_type() == "MISSION_ITEM_INT" else 1.0
+    lat, lon = msg.x * scale, msg.y * scale
+    if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0.0 and lon == 0.0):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X, f"{where}: needs a latitude and longitude")
+    north, east, _ = to_local(lat, lon, 0.0)
+    if math.hypot(north, east) > MAX_DISTANCE_M:
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
+                           f"{where}: {lat:.7f}, {lon:.7f} is {math.hypot(north, east) / 1000:.0f} km from home; "
+                           "send coordinates near home")
+    return lat, lon, north, east
+
+
+def rally_item_from_message(msg, to_local) -> RallyItem:
+    """MISSION_ITEM_INT (or MISSION_ITEM) of a RALLY plan -> RallyItem; raises MissionError with the reason."""
+    where = f"rally point {msg.seq}"
+    if msg.command != RALLY_POINT:
+        raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED,
+                           f"{where}: command {msg.command} is no rally point; use NAV_RALLY_POINT ({RALLY_POINT})")
+    lat, lon, north, east = _placed(msg, where, to_local)
+    params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))
+    return RallyItem(msg.seq, msg.command, msg.frame, params, lat, lon, float(msg.z), north, east)
+
+
+def nearest_safe_point(position: tuple[float, float, float], home: tuple[float, float, float],
+                       rally: tuple[RallyItem, ...]) -> tuple[tuple[float, float], int | None]:
+    """Where (north, east) a Return goes from ``position``: home or the rally point nearest to it, whichever is
+    nearer (PX4's RTL_TYPE 0), and the rally point's index (None: home)."""
+    places = [((home[0], home[1]), None)] + [((r.north, r.east), i) for i, r in enumerate(rally)]
+    return min(places, key=lambda p: math.hypot(p[0][0] - position[0], p[0][1] - position[1]))
 
 
 def fence_item_from_message(msg, to_local) -> FenceItem:
@@ -55,16 +115,8 @@ def fence_item_from_message(msg, to_local) -> FenceItem:
         raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED,
                            f"{where}: command {msg.command} is no fence item; use "
                            + ", ".join(f"{name} ({cmd})" for cmd, name in FENCE_COMMANDS.items()))
-    frames = RELATIVE_FRAMES + AMSL_FRAMES
-    if msg.frame not in frames:
-        raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED_FRAME,
-                           f"{where}: frame {msg.frame} is not supported; use MAV_FRAME_GLOBAL_INT (5) or "
-                           "MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
-    scale = 1e-7 if msg.get_type() == "MISSION_ITEM_INT" else 1.0
-    lat, lon = msg.x * scale, msg.y * scale
+    lat, lon, north, east = _placed(msg, where, to_local)
     params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))
-    if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0.0 and lon == 0.0):
-        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X, f"{where}: needs a latitude and longitude")
     if msg.command in (CIRCLE_INCLUSION, CIRCLE_EXCLUSION) and not (math.isfinite(params[0]) and params[0] > 0):
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
                            f"{where}: a circle's radius (param1) is {params[0]}; send it in metres, above 0")
@@ -72,11 +124,6 @@ def fence_item_from_message(msg, to_local) -> FenceItem:
             math.isfinite(params[0]) and params[0] >= 3 and params[0] == int(params[0])):
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
                            f"{where}: a polygon's vertex count (param1) is {params[0]}; send 3 or more")
-    north, east, _ = to_local(lat, lon, 0.0)
-    if math.hypot(north, east) > MAX_DISTANCE_M:
-        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
-                           f"{where}: {lat:.7f}, {lon:.7f} is {math.hypot(north, east) / 1000:.0f} km from home; "
-                           "send coordinates near home")
     return FenceItem(msg.seq, msg.command, msg.frame, params, lat, lon, float(msg.z), north, east)
 
 

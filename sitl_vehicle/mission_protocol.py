@@ -3,9 +3,9 @@
 :class:`MissionProtocol` holds the ``_on_mission_*`` handlers of ``sitl_vehicle.mavlink_io.MavlinkVehicleInterface``
 (a mixin: they use its ``commander``, ``home``, ``status_fn``, ``statustext``, ``_for_me`` and ``_upload``). An
 upload is requested item by item and handed to the commander whole once every item was read
-(:func:`sitl_vehicle.mission.mission_item_from_message`, or for a plan of type FENCE
-:func:`sitl_vehicle.geofence.fence_item_from_message` and :func:`~sitl_vehicle.geofence.geofence_from_items`); plans
-of type MISSION and FENCE are kept, not rally points. Apart from the rest of the protocol because it is a
+(:func:`sitl_vehicle.mission.mission_item_from_message`; for a plan of type FENCE
+:func:`sitl_vehicle.geofence.fence_item_from_message` and :func:`~sitl_vehicle.geofence.geofence_from_items`; for
+RALLY :func:`~sitl_vehicle.geofence.rally_item_from_message`). Apart from the rest of the protocol because it is a
 conversation of its own, with its own state: the upload under way.
 """
 
@@ -15,7 +15,15 @@ import logging
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.geofence import FENCE, FenceItem, Geofence, fence_item_from_message, geofence_from_items
+from sitl_vehicle.geofence import (
+    FENCE,
+    RALLY,
+    Geofence,
+    PlacedItem,
+    fence_item_from_message,
+    geofence_from_items,
+    rally_item_from_message,
+)
 from sitl_vehicle.mission import MAX_ITEMS, MissionError, MissionItem, mission_item_from_message
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.udp_link import UdpLink
@@ -32,16 +40,14 @@ class MissionProtocol:
                                                       mission_type))
 
     def _mission_type_ok(self, msg, link: UdpLink, reply: bool = True) -> bool:
-        """Plans of type MISSION and FENCE are kept, not rally points: uploading those is refused clearly (their
-        list reads as empty, and clearing it succeeds)."""
+        """Plans of type MISSION, FENCE and RALLY are kept; another type is refused clearly."""
         mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
-        if mission_type in (mavlink.MAV_MISSION_TYPE_MISSION, FENCE):
+        if mission_type in (mavlink.MAV_MISSION_TYPE_MISSION, FENCE, RALLY):
             return True
         if reply:
             self._mission_ack(link, msg, mavlink.MAV_MISSION_UNSUPPORTED, mission_type)
-            self.statustext(mavlink.MAV_SEVERITY_WARNING,
-                            f"Mission type {mission_type} is not supported: send missions (0) or geofences (1); rally "
-                            "points (2) are not kept", link)
+            self.statustext(mavlink.MAV_SEVERITY_WARNING, f"Mission type {mission_type} is not supported: send a "
+                                                          "mission (0), a geofence (1) or rally points (2)", link)
         return False
 
     def _mission_current(self):
@@ -78,8 +84,16 @@ class MissionProtocol:
         """Hand an uploaded plan to the commander (raises MissionError for a fence whose items make no zones)."""
         if mission_type == FENCE:
             self.commander.set_geofence(geofence_from_items(items) if items else Geofence())
+        elif mission_type == RALLY:
+            self.commander.set_rally_points(items)
         else:
             self.commander.set_mission(items, self.status_fn())
+
+    def _plan_items(self, mission_type: int) -> tuple[MissionItem, ...] | tuple[PlacedItem, ...]:
+        """The items of the commander's plan of ``mission_type``, as uploaded (none for another type)."""
+        c = self.commander
+        return {mavlink.MAV_MISSION_TYPE_MISSION: c.mission, FENCE: c.geofence.items, RALLY: c.rally_points}.get(
+            mission_type, ())
 
     def _request_item(self, link: UdpLink, msg, seq: int, mission_type: int) -> None:
         link.send(mavlink.MAVLink_mission_request_int_message(msg.get_srcSystem(), msg.get_srcComponent(), seq,
@@ -98,7 +112,8 @@ class MissionProtocol:
         if msg.seq != expected:  # a repeat or a gap: ask again for the one we need
             self._request_item(link, msg, expected, mission_type)
             return
-        read = fence_item_from_message if mission_type == FENCE else mission_item_from_message
+        read = {FENCE: fence_item_from_message, RALLY: rally_item_from_message}.get(mission_type,
+                                                                                   mission_item_from_message)
         try:
             upload["items"].append(read(msg, self.home.to_local))
             if len(upload["items"]) == upload["count"]:
@@ -123,8 +138,7 @@ class MissionProtocol:
         if not self._for_me(msg):
             return
         mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
-        count = {mavlink.MAV_MISSION_TYPE_MISSION: len(self.commander.mission),
-                 FENCE: len(self.commander.geofence.items)}.get(mission_type, 0)      # no rally points
+        count = len(self._plan_items(mission_type))
         link.send(mavlink.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), count,
                                                         mission_type))
 
@@ -132,15 +146,13 @@ class MissionProtocol:
         if not self._for_me(msg) or not self._mission_type_ok(msg, link):
             return
         mission_type = getattr(msg, "mission_type", mavlink.MAV_MISSION_TYPE_MISSION)
-        fence = mission_type == FENCE
-        plan: tuple[MissionItem, ...] | tuple[FenceItem, ...] = (self.commander.geofence.items if fence
-                                                                 else self.commander.mission)
+        plan = self._plan_items(mission_type)
         if not 0 <= msg.seq < len(plan):
             self._mission_ack(link, msg, mavlink.MAV_MISSION_INVALID_SEQUENCE, mission_type)
             return
         # the float MISSION_REQUEST is answered in its own form, MISSION_ITEM, as the mission protocol says
         int_form = msg.get_type() != "MISSION_REQUEST"
-        if fence:
+        if mission_type != mavlink.MAV_MISSION_TYPE_MISSION:
             link.send(plan[msg.seq].to_message(msg.get_srcSystem(), msg.get_srcComponent(), int_form))
         else:
             link.send(plan[msg.seq].to_message(msg.seq == self.commander.mission_seq, msg.get_srcSystem(),
@@ -158,7 +170,10 @@ class MissionProtocol:
         if mission_type in (FENCE, mavlink.MAV_MISSION_TYPE_ALL):
             self._upload = None
             self.commander.set_geofence(Geofence())
-        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, mission_type)  # no rally points to clear
+        if mission_type in (RALLY, mavlink.MAV_MISSION_TYPE_ALL):
+            self._upload = None
+            self.commander.set_rally_points([])
+        self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, mission_type)
 
     def _on_mission_set_current(self, msg, link: UdpLink) -> None:
         if self._for_me(msg):
@@ -168,4 +183,4 @@ class MissionProtocol:
 
 def _plan(mission_type: int) -> str:
     """What a plan of ``mission_type`` is called in the vehicle's messages."""
-    return "Geofence" if mission_type == FENCE else "Mission"
+    return {FENCE: "Geofence", RALLY: "Rally points"}.get(mission_type, "Mission")

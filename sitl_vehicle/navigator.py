@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_vehicle.geofence import nearest_safe_point
 from sitl_vehicle.mission import NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF
 from sitl_vehicle.modes import FlightMode
 
@@ -32,20 +33,24 @@ class Navigator:
 
     def _begin_return(self, status: VehicleStatus) -> None:
         """Return's first leg: climb where the vehicle is to RTL_RETURN_ALT above home (never down), and no higher
-        than a metre under the geofence's ceiling (GF_MAX_VER_DIST), as PX4's Return keeps inside the fence."""
+        than a metre under the geofence's ceiling (GF_MAX_VER_DIST), as PX4's Return keeps inside the fence; the
+        legs after fly to home or to the nearest rally point, whichever is nearer (PX4's RTL_TYPE 0)."""
         self._rtl_leg = RTL_CLIMB
         self._rtl_start_xy = status.position[:2]
+        self._rtl_destination, self._rtl_rally = nearest_safe_point(status.position, self.home, self.rally_points)
         climb = self.params["RTL_RETURN_ALT"]
         if self.params["GF_MAX_VER_DIST"] > 0:
             climb = min(climb, max(self.params["GF_MAX_VER_DIST"] - 1.0, 0.0))
         self._rtl_z = min(status.position[2], self.home[2] - climb)  # NED: up is -z
-        self._say(mavlink.MAV_SEVERITY_INFO, f"Return: flying home at {self.home[2] - self._rtl_z:.1f} m above home")
+        where = "home" if self._rtl_rally is None else f"to rally point {self._rtl_rally}"
+        self._say(mavlink.MAV_SEVERITY_INFO, f"Return: flying {where} at {self.home[2] - self._rtl_z:.1f} m above "
+                                             "home")
 
     def _descend_z(self) -> float:
         return max(self._rtl_z, self.home[2] - self.params["RTL_DESCEND_ALT"])  # descending never climbs
 
     def _return_target(self) -> tuple[float, float, float]:
-        hx, hy, _ = self.home
+        hx, hy = self._rtl_destination
         if self._rtl_leg == RTL_CLIMB:
             return (*self._rtl_start_xy, self._rtl_z)
         if self._rtl_leg == RTL_RETURN:
@@ -56,7 +61,7 @@ class Navigator:
         """Move to Return's next leg once the current one's target is reached (within NAV_ACC_RAD)."""
         x, y, z = status.position
         reached = self.params["NAV_ACC_RAD"]
-        hx, hy, _ = self.home
+        hx, hy = self._rtl_destination
         if self._rtl_leg == RTL_CLIMB and abs(z - self._rtl_z) <= reached:
             self._rtl_leg = RTL_RETURN
         if self._rtl_leg == RTL_RETURN and math.hypot(x - hx, y - hy) <= reached:
@@ -69,7 +74,8 @@ class Navigator:
             if delay >= 0 and status.time_s - self._rtl_loiter_since >= delay:
                 self._rtl_leg = RTL_LAND
                 self._land_xy = (hx, hy)
-                self._say(mavlink.MAV_SEVERITY_INFO, "Return: landing at home")
+                self._say(mavlink.MAV_SEVERITY_INFO, "Return: landing at home" if self._rtl_rally is None
+                          else f"Return: landing at rally point {self._rtl_rally}")
 
     def _begin_mission_item(self, status: VehicleStatus) -> None:
         item = self.mission[self.mission_seq]

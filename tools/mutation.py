@@ -66,7 +66,8 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "sitl_vehicle.commander": ([f"sitl_vehicle/{m}.py" for m in ("commander", "failsafes", "navigator", "stick_modes",
                                                                   "geofence")],
                                [f"tests/sitl_vehicle/test_{t}.py" for t in ("commander", "takeoff", "mission",
-                                                                            "manual", "acro", "geofence")]),
+                                                                            "manual", "acro", "geofence",
+                                                                            "rally")]),
 }
 
 STAGING_PYPROJECT = """\

@@ -25,7 +25,7 @@ from sitl_vehicle.mavlink_io import Home
 from sitl_vehicle.mission import MissionError
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore
-from support.mavclient import px4_mode_name, wait_until
+from support.mavclient import px4_mode_name, read_plan, upload_plan
 
 HOME = Home()
 GLOBAL_INT = mavlink.MAV_FRAME_GLOBAL_INT
@@ -193,37 +193,17 @@ def test_arming_outside_the_fence_is_refused_unless_gf_action_is_none():
 
 # ------------------------------------------------------------------------------------------- over MAVLink
 
-def send_fence(client, msgs) -> int:
-    """Upload ``msgs`` as a FENCE plan, the way MAVSDK's Geofence plugin does; the final MISSION_ACK's type."""
-    with client.lock:
-        client.conn.mav.mission_count_send(1, 1, len(msgs), FENCE)
-    while True:
-        msg = client.recv(["MISSION_REQUEST_INT", "MISSION_ACK"], 3)
-        assert msg is not None, "the vehicle stopped answering the upload"
-        if msg.get_type() == "MISSION_ACK":
-            assert msg.mission_type == FENCE
-            return msg.type
-        assert msg.mission_type == FENCE
-        with client.lock:
-            client.conn.mav.send(msgs[msg.seq])
-
-
 def test_a_fence_is_uploaded_read_back_cleared_and_breached_over_mavlink(make_vehicle):
     from tests.sitl_vehicle.test_loopback import take_off
 
     server, client = make_vehicle()
-    assert send_fence(client, square(POLYGON_INCLUSION, 3.0)[:3]) == mavlink.MAV_MISSION_INVALID_PARAM1
+    assert upload_plan(client, square(POLYGON_INCLUSION, 3.0)[:3], FENCE) == mavlink.MAV_MISSION_INVALID_PARAM1
     assert "Geofence refused: fence item 0: a polygon of 4 vertices" in client.statustext("Geofence refused", 3)
     msgs = square(POLYGON_INCLUSION, 3.0) + [fence_msg(4, CIRCLE_EXCLUSION, 2.0, 2.0, 0.5)]
-    assert send_fence(client, msgs) == mavlink.MAV_MISSION_ACCEPTED
+    assert upload_plan(client, msgs, FENCE) == mavlink.MAV_MISSION_ACCEPTED
     assert len(server.commander.geofence.zones) == 2 and server.commander.mission == ()
-    with client.lock:
-        client.conn.mav.mission_request_list_send(1, 1, FENCE)
-    assert client.recv("MISSION_COUNT", 3, lambda m: m.mission_type == FENCE).count == 5
-    with client.lock:
-        client.conn.mav.mission_request_int_send(1, 1, 4, FENCE)
-    item = client.recv("MISSION_ITEM_INT", 3)
-    assert (item.seq, item.command, item.param1, item.mission_type) == (4, CIRCLE_EXCLUSION, 0.5, FENCE)
+    count, item = read_plan(client, FENCE, 4)
+    assert count == 5 and (item.seq, item.command, item.param1, item.mission_type) == (4, CIRCLE_EXCLUSION, 0.5, FENCE)
     take_off(client)
     with client.lock:                    # fly out of the fence's north side: Hold where it stops
         client.conn.mav.set_position_target_local_ned_send(0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, 0b1001_1111_1000,
@@ -234,7 +214,7 @@ def test_a_fence_is_uploaded_read_back_cleared_and_breached_over_mavlink(make_ve
         "Geofence breached", 15)
     assert client.recv("HEARTBEAT", 3, lambda m: px4_mode_name(m) == "LOITER") is not None
     client.stop_stream()
-    assert wait_until(lambda: abs(server.sim.truth.velocity[0]) < 0.1, 10)
+    assert client.wait_reading(lambda: abs(server.sim.truth.velocity[0]) < 0.1, 10)
     assert 3.0 < server.sim.truth.position[0] < 5.0 and not server.sim.crashed
     with client.lock:
         client.conn.mav.mission_clear_all_send(1, 1, FENCE)

@@ -158,8 +158,9 @@ def test_bad_uploads_are_refused_with_the_reason_and_keep_the_old_mission(make_v
     assert "command 178 is not supported" in client.statustext("Mission refused", 3)
     assert len(server.commander.mission) == 1
     with client.lock:
-        client.conn.mav.mission_count_send(1, 1, 1, mavlink.MAV_MISSION_TYPE_RALLY)
+        client.conn.mav.mission_count_send(1, 1, 1, 7)                 # no such plan type
     assert client.recv("MISSION_ACK", 3).type == mavlink.MAV_MISSION_UNSUPPORTED
+    assert "Mission type 7 is not supported" in client.statustext("Mission type", 3)
     with client.lock:  # ground stations read the rally points and the geofence on connecting: empty, not an error
         client.conn.mav.mission_request_list_send(1, 1, mavlink.MAV_MISSION_TYPE_RALLY)
     assert client.recv("MISSION_COUNT", 3).count == 0

@@ -39,6 +39,16 @@ class MavClient:
         return recv_unlocked(self.conn, self.lock,
                              lambda m: m.get_type() in kinds and (condition is None or condition(m)), timeout)
 
+    def wait_reading(self, predicate, timeout: float) -> bool:
+        """Wait for ``predicate()`` while reading (and dropping) what the vehicle sends: a client that stops reading
+        fills its socket's buffer with telemetry, and the kernel then drops what comes next (an ACK)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            recv_unlocked(self.conn, self.lock, lambda m: True, 0.02)
+        return predicate()
+
     def statustext(self, fragment: str, timeout: float = 5.0) -> str | None:
         """The first STATUSTEXT containing ``fragment``, reassembled from MAVLink 2 chunks (id, chunk_seq)."""
         deadline = time.monotonic() + timeout
@@ -103,6 +113,31 @@ class MavClient:
     def close(self):
         self.stop_stream()
         self.conn.close()
+
+
+def upload_plan(client, msgs, mission_type: int) -> int:
+    """Upload ``msgs`` as a plan of ``mission_type`` (fence, rally points), answering the vehicle's item requests
+    as MAVSDK and QGroundControl do; every request and the final MISSION_ACK must name that type.  The ACK's type."""
+    with client.lock:
+        client.conn.mav.mission_count_send(1, 1, len(msgs), mission_type)
+    while True:
+        msg = client.recv(["MISSION_REQUEST_INT", "MISSION_ACK"], 3)
+        assert msg is not None, "the vehicle stopped answering the upload"
+        assert msg.mission_type == mission_type
+        if msg.get_type() == "MISSION_ACK":
+            return msg.type
+        with client.lock:
+            client.conn.mav.send(msgs[msg.seq])
+
+
+def read_plan(client, mission_type: int, seq: int):
+    """The vehicle's count of items in its plan of ``mission_type``, and its item ``seq`` (MISSION_ITEM_INT)."""
+    with client.lock:
+        client.conn.mav.mission_request_list_send(1, 1, mission_type)
+    count = client.recv("MISSION_COUNT", 3, lambda m: m.mission_type == mission_type).count
+    with client.lock:
+        client.conn.mav.mission_request_int_send(1, 1, seq, mission_type)
+    return count, client.recv("MISSION_ITEM_INT", 3)
 
 
 def px4_mode_name(hb) -> str:
