@@ -22,7 +22,7 @@ from typing import ClassVar
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.mission import AMSL_FRAMES, MAX_DISTANCE_M, MAX_ITEMS, RELATIVE_FRAMES, MissionError, PlanItem
+from sitl_vehicle.mission import MAX_ITEMS, MissionError, PlanItem, global_position, local_near_home
 
 POLYGON_INCLUSION = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
 POLYGON_EXCLUSION = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
@@ -45,14 +45,8 @@ class PlacedItem(PlanItem):
     MISSION_TYPE: ClassVar[int]
 
     def to_message(self, target_system: int, target_component: int, int_form: bool = True):
-        """MISSION_ITEM_INT of the item's plan (or the older float MISSION_ITEM)."""
-        if int_form:
-            return mavlink.MAVLink_mission_item_int_message(
-                target_system, target_component, self.seq, self.frame, self.command, 0, 1, *self.params,
-                int(round(self.lat * 1e7)), int(round(self.lon * 1e7)), self.alt, self.MISSION_TYPE)
-        return mavlink.MAVLink_mission_item_message(
-            target_system, target_component, self.seq, self.frame, self.command, 0, 1, *self.params, self.lat,
-            self.lon, self.alt, self.MISSION_TYPE)
+        """MISSION_ITEM_INT of the item's plan (or the older float MISSION_ITEM): :meth:`PlanItem.item_message`."""
+        return self.item_message(target_system, target_component, int_form, self.MISSION_TYPE)
 
 
 @dataclass(frozen=True)
@@ -72,19 +66,10 @@ class RallyItem(PlacedItem):
 def _placed(msg, where: str, to_local) -> tuple[float, float, float, float]:
     """(lat, lon, north, east) of an item that must have a place near home, in a global frame; raises MissionError
     naming the item, what is wrong and what to send instead."""
-    if msg.frame not in RELATIVE_FRAMES + AMSL_FRAMES:
-        raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED_FRAME,
-                           f"{where}: frame {msg.frame} is not supported; use MAV_FRAME_GLOBAL_INT (5) or "
-                           "MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
-    scale = 1e-7 if msg.get_type() == "MISSION_ITEM_INT" else 1.0
-    lat, lon = msg.x * scale, msg.y * scale
-    if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0.0 and lon == 0.0):
+    lat, lon, placed = global_position(msg, where)
+    if not placed:
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X, f"{where}: needs a latitude and longitude")
-    north, east, _ = to_local(lat, lon, 0.0)
-    if math.hypot(north, east) > MAX_DISTANCE_M:
-        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
-                           f"{where}: {lat:.7f}, {lon:.7f} is {math.hypot(north, east) / 1000:.0f} km from home; "
-                           "send coordinates near home")
+    north, east = local_near_home(where, lat, lon, 0.0, to_local)
     return lat, lon, north, east
 
 

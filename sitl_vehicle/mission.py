@@ -53,6 +53,18 @@ class PlanItem:
     north: float
     east: float
 
+    def item_message(self, target_system: int, target_component: int, int_form: bool, mission_type: int,
+                     current: bool = False, autocontinue: bool = True):
+        """MISSION_ITEM_INT (lat/lon in 1e-7 degrees), or with ``int_form`` false the older float MISSION_ITEM
+        (degrees, and the frame's non-_INT name), as the MAVLink mission protocol answers MISSION_REQUEST."""
+        if int_form:
+            return mavlink.MAVLink_mission_item_int_message(
+                target_system, target_component, self.seq, self.frame, self.command, int(current), int(autocontinue),
+                *self.params, int(round(self.lat * 1e7)), int(round(self.lon * 1e7)), self.alt, mission_type)
+        return mavlink.MAVLink_mission_item_message(
+            target_system, target_component, self.seq, FLOAT_FRAMES.get(self.frame, self.frame), self.command,
+            int(current), int(autocontinue), *self.params, self.lat, self.lon, self.alt, mission_type)
+
 
 @dataclass(frozen=True)
 class MissionItem(PlanItem):
@@ -89,17 +101,9 @@ class MissionItem(PlanItem):
         return home_down - self.alt if self.alt_relative else self.amsl_down
 
     def to_message(self, current: bool, target_system: int, target_component: int, int_form: bool = True):
-        """MISSION_ITEM_INT (lat/lon in 1e-7 degrees), or with ``int_form`` false the older float MISSION_ITEM
-        (degrees, and the frame's non-_INT name), as the MAVLink mission protocol answers MISSION_REQUEST."""
-        if int_form:
-            return mavlink.MAVLink_mission_item_int_message(
-                target_system, target_component, self.seq, self.frame, self.command, int(current),
-                int(self.autocontinue), *self.params, int(round(self.lat * 1e7)), int(round(self.lon * 1e7)),
-                self.alt, mavlink.MAV_MISSION_TYPE_MISSION)
-        return mavlink.MAVLink_mission_item_message(
-            target_system, target_component, self.seq, FLOAT_FRAMES.get(self.frame, self.frame), self.command,
-            int(current), int(self.autocontinue), *self.params, self.lat, self.lon, self.alt,
-            mavlink.MAV_MISSION_TYPE_MISSION)
+        """The item as the mission protocol sends it back (see :meth:`PlanItem.item_message`)."""
+        return self.item_message(target_system, target_component, int_form, mavlink.MAV_MISSION_TYPE_MISSION,
+                                 current, self.autocontinue)
 
 
 def mission_item_from_message(msg, to_local) -> MissionItem:
@@ -113,29 +117,43 @@ def mission_item_from_message(msg, to_local) -> MissionItem:
         raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED,
                            f"{where}: command {msg.command} is not supported; use "
                            + ", ".join(f"{name} ({cmd})" for cmd, name in SUPPORTED_COMMANDS.items()))
+    lat, lon, placed = global_position(msg, where)
+    alt = float(msg.z)
+    params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))  # NaN: the default
+    if not math.isfinite(alt):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM7, f"{where}: altitude is {alt}; send metres")
+    amsl_down = to_local(0.0, 0.0, alt)[2] if msg.frame in AMSL_FRAMES else math.nan
+    if not placed and msg.command in (NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH):
+        north = east = math.nan  # "here", as PX4 reads a Takeoff or Land without coordinates
+    elif not placed:
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
+                           f"{where}: {SUPPORTED_COMMANDS[msg.command]} needs a latitude and longitude")
+    else:
+        north, east = local_near_home(where, lat, lon, alt, to_local)
+    return MissionItem(seq=seq, command=msg.command, frame=msg.frame, params=params, lat=lat, lon=lon, alt=alt,
+                       north=north, east=east, alt_relative=msg.frame in RELATIVE_FRAMES, amsl_down=amsl_down,
+                       autocontinue=bool(msg.autocontinue))
+
+
+def global_position(msg, where: str) -> tuple[float, float, bool]:
+    """An uploaded item's latitude and longitude in degrees, and whether they name a place (finite, not 0, 0);
+    raises MissionError for an item not in a global frame (altitude above home or above mean sea level)."""
     if msg.frame not in RELATIVE_FRAMES + AMSL_FRAMES:
         raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED_FRAME,
                            f"{where}: frame {msg.frame} is not supported; use MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6) "
                            "or MAV_FRAME_GLOBAL_INT (5)")
     scale = 1e-7 if msg.get_type() == "MISSION_ITEM_INT" else 1.0
-    lat, lon, alt = msg.x * scale, msg.y * scale, float(msg.z)
-    params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))  # NaN: the default
-    if not math.isfinite(alt):
-        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM7, f"{where}: altitude is {alt}; send metres")
-    amsl_down = to_local(0.0, 0.0, alt)[2] if msg.frame in AMSL_FRAMES else math.nan
-    no_position = not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0.0 and lon == 0.0)
-    if no_position and msg.command in (NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH):
-        north = east = math.nan  # "here", as PX4 reads a Takeoff or Land without coordinates
-    elif no_position:
+    lat, lon = msg.x * scale, msg.y * scale
+    return lat, lon, math.isfinite(lat) and math.isfinite(lon) and not (lat == 0.0 and lon == 0.0)
+
+
+def local_near_home(where: str, lat: float, lon: float, alt: float, to_local) -> tuple[float, float]:
+    """The local (north, east) of a place; raises MissionError for one farther than MAX_DISTANCE_M from the local
+    origin (coordinates sent wrong, say as 0 or in another unit)."""
+    north, east, _ = to_local(lat, lon, alt)
+    distance = math.hypot(north, east)
+    if distance > MAX_DISTANCE_M:
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
-                           f"{where}: {SUPPORTED_COMMANDS[msg.command]} needs a latitude and longitude")
-    else:
-        north, east, _ = to_local(lat, lon, alt)
-        distance = math.hypot(north, east)
-        if distance > MAX_DISTANCE_M:
-            raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
-                               f"{where}: {lat:.7f}, {lon:.7f} is {distance / 1000:.0f} km from home; send "
-                               "coordinates near home")
-    return MissionItem(seq=seq, command=msg.command, frame=msg.frame, params=params, lat=lat, lon=lon, alt=alt,
-                       north=north, east=east, alt_relative=msg.frame in RELATIVE_FRAMES, amsl_down=amsl_down,
-                       autocontinue=bool(msg.autocontinue))
+                           f"{where}: {lat:.7f}, {lon:.7f} is {distance / 1000:.0f} km from home; send coordinates "
+                           "near home")
+    return north, east

@@ -262,7 +262,7 @@ def test_every_refusal_carries_its_mission_result_and_the_whole_reason():
         "(5004), NAV_FENCE_RETURN_POINT (5000)")
     result, text = refusal(fence_msg(0, CIRCLE_INCLUSION, 1.0, 1.0, 2.0, frame=mavlink.MAV_FRAME_LOCAL_NED))
     assert result == mavlink.MAV_MISSION_UNSUPPORTED_FRAME and text.endswith(
-        "use MAV_FRAME_GLOBAL_INT (5) or MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
+        "use MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6) or MAV_FRAME_GLOBAL_INT (5)")
     result, text = refusal(fence_msg(0, CIRCLE_INCLUSION, 1.0, 1.0, -1.5))
     assert result == mavlink.MAV_MISSION_INVALID_PARAM1 and "radius (param1) is -1.5;" in text
     assert refusal(fence_msg(0, POLYGON_INCLUSION, 1.0, 1.0, 2.0))[0] == mavlink.MAV_MISSION_INVALID_PARAM1
@@ -317,7 +317,8 @@ def test_a_fence_item_goes_back_as_it_came_in_either_form():
     old = item.to_message(9, 8, int_form=False)
     assert old.get_type() == "MISSION_ITEM"
     assert (old.target_system, old.target_component, old.seq, old.frame, old.command, old.current, old.autocontinue,
-            old.param1, old.z, old.mission_type) == (9, 8, 7, GLOBAL_INT, CIRCLE_EXCLUSION, 0, 1, 2.5, 12.0, FENCE)
+            old.param1, old.z, old.mission_type) == (9, 8, 7, mavlink.MAV_FRAME_GLOBAL, CIRCLE_EXCLUSION, 0, 1, 2.5,
+                                                     12.0, FENCE)          # the float form names the float frame
     assert old.x == pytest.approx(msg.x * 1e-7) and old.y == pytest.approx(msg.y * 1e-7)
 
 
