@@ -37,7 +37,7 @@ from sitl_vehicle.failsafes import (
 )
 from sitl_vehicle.geofence import Geofence, RallyItem
 from sitl_vehicle.manual import Sticks
-from sitl_vehicle.mission import MissionItem
+from sitl_vehicle.mission import MissionItem, mission_landing
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.navigator import (
     MIS_CLIMB,
@@ -53,6 +53,7 @@ from sitl_vehicle.navigator import (
     Navigator,
 )
 from sitl_vehicle.params import ParameterStore
+from sitl_vehicle.return_plan import ReturnPlan
 from sitl_vehicle.sim import ManualSetpoint, Setpoint
 from sitl_vehicle.stick_modes import StickModes, stopping_point
 
@@ -166,8 +167,8 @@ class Commander(Failsafes, Navigator, StickModes):
         self.geofence = Geofence()
         self._geofence_breached = False  # the geofence failsafe acted on this breach already
         self.rally_points: tuple[RallyItem, ...] = ()
-        self._rtl_destination = (0.0, 0.0)  # where Return flies: home or a rally point (its index; None: home)
-        self._rtl_rally: int | None = None
+        self._rtl_plan = ReturnPlan((0.0, 0.0), "flying home", "landing at home")  # where and how Return flies
+        self._rtl_path_index = 0  # the point of its path being flown to
 
     # ----------------------------------------------------------------------------------- requests
     def arm(self, status: VehicleStatus, force: bool = False) -> Reply:
@@ -308,6 +309,14 @@ class Commander(Failsafes, Navigator, StickModes):
             self._mission_complete = False  # start from `first` rather than from the beginning
         return self.set_mode(FlightMode.AUTO_MISSION, status)
 
+    def start_mission_landing(self, status: VehicleStatus) -> Reply:
+        """MAV_CMD_DO_LAND_START: Mission mode from where the mission's landing starts, as PX4 jumps to it."""
+        landing = mission_landing(self.mission)
+        if landing is None:
+            return self._refuse(mavlink.MAV_RESULT_DENIED, "Landing sequence denied: the mission has no landing "
+                                                           "(upload one with DO_LAND_START or NAV_LAND)")
+        return self.start_mission(status, landing[0])
+
     @property
     def mission_finished(self) -> bool:
         return bool(self.mission) and self._mission_complete
@@ -409,6 +418,7 @@ class Commander(Failsafes, Navigator, StickModes):
     def _enter(self, mode: FlightMode, status: VehicleStatus) -> None:
         if mode is not self.mode:
             log.info("mode %s -> %s", self.mode.label, mode.label)
+        from_mission = self.mode is FlightMode.AUTO_MISSION
         self.mode = mode
         self._hold_yaw = status.yaw
         if mode is FlightMode.AUTO_LOITER:
@@ -424,7 +434,7 @@ class Commander(Failsafes, Navigator, StickModes):
             self._stick_hold_xy = self._stick_hold_z = None  # set from the state when the sticks are centred
             self._stick_yawing = False
         elif mode is FlightMode.AUTO_RTL:
-            self._begin_return(status)
+            self._begin_return(status, self.mission_seq if from_mission else None)
 
     def _mission_item_reached(self, status: VehicleStatus) -> None:
         self.mission_reached.append(self.mission_seq)

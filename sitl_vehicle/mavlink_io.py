@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
+import struct
 import time
 from collections.abc import Callable
 
@@ -230,6 +231,8 @@ class MavlinkVehicleInterface(MissionProtocol):
             return c.set_mode(mode, status)
         if command == mavlink.MAV_CMD_MISSION_START:
             return c.start_mission(status, int(_nan_to(p[0], 0)))
+        if command == mavlink.MAV_CMD_DO_LAND_START:
+            return c.start_mission_landing(status)
         if command == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
             return c.set_mission_current(int(_nan_to(p[0], 0)), status)
         if command in (mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAV_CMD_REQUEST_MESSAGE) \
@@ -320,8 +323,16 @@ class MavlinkVehicleInterface(MissionProtocol):
         if not self._for_me(msg):
             return
         name = _param_id(msg.param_id)
+        sent_integer = msg.param_type in INTEGER_PARAM_BYTES
         try:
-            self.params.set(name, msg.param_value)
+            integer = name in self.params and self.params.spec(name).integer
+            if name in self.params and integer != sent_integer:
+                # PX4 would read the bytes as its own type and keep a wrong value: refuse instead
+                raise ParameterError(f"{name} is an integer: send MAV_PARAM_TYPE_INT32, the value's bytes in the "
+                                     "float field (PX4's bytewise encoding)" if integer
+                                     else f"{name} is a float: send MAV_PARAM_TYPE_REAL32")
+            self.params.set(name, param_float_as_int(msg.param_value, msg.param_type) if sent_integer
+                            else msg.param_value)
         except ParameterError as exc:
             log.warning("PARAM_SET refused: %s", exc)
             self.statustext(mavlink.MAV_SEVERITY_ERROR, f"Param: {exc}", link)
@@ -330,8 +341,11 @@ class MavlinkVehicleInterface(MissionProtocol):
         link.send(self._param_value(name))  # the stored value, as PX4 answers both success and refusal
 
     def _param_value(self, name: str):
-        return mavlink.MAVLink_param_value_message(name.encode(), self.params[name], mavlink.MAV_PARAM_TYPE_REAL32,
-                                                   len(self.params), self.params.index(name))
+        value, kind = self.params[name], mavlink.MAV_PARAM_TYPE_REAL32
+        if self.params.spec(name).integer:
+            value, kind = int_as_param_float(int(value)), mavlink.MAV_PARAM_TYPE_INT32
+        return mavlink.MAVLink_param_value_message(name.encode(), value, kind, len(self.params),
+                                                   self.params.index(name))
 
     def _on_ping(self, msg, link: UdpLink) -> None:
         if msg.target_system == 0:
@@ -358,6 +372,24 @@ def statustext_messages(severity: int, text: str, text_id: int) -> list:
 def _msg_name(msg_id: int) -> str | None:
     cls = mavlink.mavlink_map.get(msg_id)
     return cls.msgname if cls is not None else None
+
+
+# MAV_PARAM_TYPE of an integer -> (its size in bytes, signed), for PX4's bytewise encoding in the float field
+INTEGER_PARAM_BYTES = {mavlink.MAV_PARAM_TYPE_UINT8: (1, False), mavlink.MAV_PARAM_TYPE_INT8: (1, True),
+                       mavlink.MAV_PARAM_TYPE_UINT16: (2, False), mavlink.MAV_PARAM_TYPE_INT16: (2, True),
+                       mavlink.MAV_PARAM_TYPE_UINT32: (4, False), mavlink.MAV_PARAM_TYPE_INT32: (4, True)}
+
+
+def int_as_param_float(value: int) -> float:
+    """An INT32 parameter as PX4 sends it in PARAM_VALUE's float field: its four bytes, unchanged."""
+    return struct.unpack("<f", struct.pack("<i", value))[0]
+
+
+def param_float_as_int(field: float, param_type: int) -> int:
+    """The integer of type ``param_type`` whose bytes a PARAM_SET's float field carries (the inverse of
+    :func:`int_as_param_float`; smaller types in the low bytes)."""
+    size, signed = INTEGER_PARAM_BYTES[param_type]
+    return int.from_bytes(struct.pack("<f", field)[:size], "little", signed=signed)
 
 
 def _param_id(raw) -> str:

@@ -19,8 +19,11 @@ NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
 NAV_RETURN_TO_LAUNCH = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
 NAV_LAND = mavlink.MAV_CMD_NAV_LAND
 NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
+DO_LAND_START = mavlink.MAV_CMD_DO_LAND_START  # marks where the mission's landing begins (flown past in Mission)
 SUPPORTED_COMMANDS = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_RETURN_TO_LAUNCH: "NAV_RETURN_TO_LAUNCH",
-                      NAV_LAND: "NAV_LAND", NAV_TAKEOFF: "NAV_TAKEOFF"}
+                      NAV_LAND: "NAV_LAND", NAV_TAKEOFF: "NAV_TAKEOFF", DO_LAND_START: "DO_LAND_START"}
+# items that may leave out a place: "here" for a Takeoff or Land, and a marker with nowhere of its own
+UNPLACED_COMMANDS = (NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH, DO_LAND_START)
 # frames: altitude relative to home, or above mean sea level
 RELATIVE_FRAMES = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 AMSL_FRAMES = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
@@ -117,13 +120,16 @@ def mission_item_from_message(msg, to_local) -> MissionItem:
         raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED,
                            f"{where}: command {msg.command} is not supported; use "
                            + ", ".join(f"{name} ({cmd})" for cmd, name in SUPPORTED_COMMANDS.items()))
-    lat, lon, placed = global_position(msg, where)
+    if msg.command == DO_LAND_START and msg.frame == mavlink.MAV_FRAME_MISSION:
+        lat, lon, placed = 0.0, 0.0, False   # a marker with no place of its own, in the frame of commands
+    else:
+        lat, lon, placed = global_position(msg, where)
     alt = float(msg.z)
     params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))  # NaN: the default
     if not math.isfinite(alt):
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM7, f"{where}: altitude is {alt}; send metres")
     amsl_down = to_local(0.0, 0.0, alt)[2] if msg.frame in AMSL_FRAMES else math.nan
-    if not placed and msg.command in (NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH):
+    if not placed and msg.command in UNPLACED_COMMANDS:
         north = east = math.nan  # "here", as PX4 reads a Takeoff or Land without coordinates
     elif not placed:
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM5_X,
@@ -157,3 +163,15 @@ def local_near_home(where: str, lat: float, lon: float, alt: float, to_local) ->
                            f"{where}: {lat:.7f}, {lon:.7f} is {distance / 1000:.0f} km from home; send coordinates "
                            "near home")
     return north, east
+
+
+def mission_landing(items) -> tuple[int, int] | None:
+    """The mission's landing as PX4 marks it: (where it starts, its Land item), the start being the first
+    DO_LAND_START followed by a Land item, or with no such marker the first Land item itself; None: no landing."""
+    lands = [i for i, item in enumerate(items) if item.command == NAV_LAND]
+    for start, item in enumerate(items):
+        if item.command == DO_LAND_START:
+            after = [i for i in lands if i > start]
+            if after:
+                return start, after[0]
+    return (lands[0], lands[0]) if lands else None

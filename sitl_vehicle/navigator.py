@@ -14,15 +14,17 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.geofence import nearest_safe_point
-from sitl_vehicle.mission import NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF
+from sitl_vehicle.mission import DO_LAND_START, NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF
 from sitl_vehicle.modes import FlightMode
+from sitl_vehicle.return_plan import plan_return
 
 if TYPE_CHECKING:
     from sitl_vehicle.commander import VehicleStatus
 
-# Return mode's legs, in order (PX4's RTL: climb, fly home at the return altitude, descend, wait, land)
-RTL_CLIMB, RTL_RETURN, RTL_DESCEND, RTL_LOITER, RTL_LAND = "climb", "return", "descend", "loiter", "land"
+# Return mode's legs, in order (PX4's RTL: climb, the plan's path (a mission's items), fly to the destination at
+# the altitude reached, descend, wait, land; a mission's landing lands straight after the flight there)
+RTL_CLIMB, RTL_PATH, RTL_RETURN = "climb", "path", "return"
+RTL_DESCEND, RTL_LOITER, RTL_LAND = "descend", "loiter", "land"
 # Mission mode's phases within an item: climb (a Takeoff item, or the climb PX4 adds before a first waypoint
 # when started on the ground), fly to the item, hold there, land; done: holding at the last item
 MIS_CLIMB, MIS_FLY, MIS_HOLD, MIS_LAND, MIS_DONE = "climb", "fly", "hold", "land", "done"
@@ -31,28 +33,38 @@ MIS_CLIMB, MIS_FLY, MIS_HOLD, MIS_LAND, MIS_DONE = "climb", "fly", "hold", "land
 class Navigator:
     """Return's legs and a mission's items, mixed into ``Commander``."""
 
-    def _begin_return(self, status: VehicleStatus) -> None:
+    def _begin_return(self, status: VehicleStatus, mission_seq: int | None = None) -> None:
         """Return's first leg: climb where the vehicle is to RTL_RETURN_ALT above home (never down), and no higher
         than a metre under the geofence's ceiling (GF_MAX_VER_DIST), as PX4's Return keeps inside the fence; the
-        legs after fly to home or to the nearest rally point, whichever is nearer (PX4's RTL_TYPE 0)."""
-        self._rtl_leg = RTL_CLIMB
+        legs after go where and how RTL_TYPE says (:func:`sitl_vehicle.return_plan.plan_return`; ``mission_seq``:
+        the item being flown, when Return began in Mission mode)."""
+        plan = plan_return(int(self.params["RTL_TYPE"]), status.position, self.home, self.rally_points,
+                           self.mission, mission_seq)
+        self._rtl_plan, self._rtl_path_index = plan, 0
         self._rtl_start_xy = status.position[:2]
-        self._rtl_destination, self._rtl_rally = nearest_safe_point(status.position, self.home, self.rally_points)
         climb = self.params["RTL_RETURN_ALT"]
         if self.params["GF_MAX_VER_DIST"] > 0:
             climb = min(climb, max(self.params["GF_MAX_VER_DIST"] - 1.0, 0.0))
-        self._rtl_z = min(status.position[2], self.home[2] - climb)  # NED: up is -z
-        where = "home" if self._rtl_rally is None else f"to rally point {self._rtl_rally}"
-        self._say(mavlink.MAV_SEVERITY_INFO, f"Return: flying {where} at {self.home[2] - self._rtl_z:.1f} m above "
-                                             "home")
+        self._rtl_z = status.position[2]
+        if plan.climb:
+            self._rtl_leg = RTL_CLIMB
+            self._rtl_z = min(status.position[2], self.home[2] - climb)  # NED: up is -z
+            self._say(mavlink.MAV_SEVERITY_INFO, f"Return: {plan.flying} at {self.home[2] - self._rtl_z:.1f} m "
+                                                 "above home")
+        else:
+            self._rtl_leg = RTL_PATH if plan.path else RTL_RETURN
+            self._say(mavlink.MAV_SEVERITY_INFO, f"Return: {plan.flying}")
 
     def _descend_z(self) -> float:
         return max(self._rtl_z, self.home[2] - self.params["RTL_DESCEND_ALT"])  # descending never climbs
 
     def _return_target(self) -> tuple[float, float, float]:
-        hx, hy = self._rtl_destination
+        hx, hy = self._rtl_plan.destination
         if self._rtl_leg == RTL_CLIMB:
             return (*self._rtl_start_xy, self._rtl_z)
+        if self._rtl_leg == RTL_PATH:
+            north, east, down = self._rtl_plan.path[self._rtl_path_index]
+            return (north, east, down if math.isfinite(down) else self._rtl_z)
         if self._rtl_leg == RTL_RETURN:
             return (hx, hy, self._rtl_z)
         return (hx, hy, self._descend_z())
@@ -61,25 +73,40 @@ class Navigator:
         """Move to Return's next leg once the current one's target is reached (within NAV_ACC_RAD)."""
         x, y, z = status.position
         reached = self.params["NAV_ACC_RAD"]
-        hx, hy = self._rtl_destination
+        plan = self._rtl_plan
+        hx, hy = plan.destination
         if self._rtl_leg == RTL_CLIMB and abs(z - self._rtl_z) <= reached:
-            self._rtl_leg = RTL_RETURN
+            self._rtl_leg = RTL_PATH if plan.path else RTL_RETURN
+        if self._rtl_leg == RTL_PATH and math.dist(status.position, self._return_target()) <= reached:
+            self._rtl_z = self._return_target()[2]       # what follows is flown at this altitude
+            self._rtl_path_index += 1
+            if self._rtl_path_index == len(plan.path):
+                self._rtl_leg = RTL_RETURN
         if self._rtl_leg == RTL_RETURN and math.hypot(x - hx, y - hy) <= reached:
-            self._rtl_leg = RTL_DESCEND
+            if plan.mission_landing:
+                self._return_lands()
+            else:
+                self._rtl_leg = RTL_DESCEND
         if self._rtl_leg == RTL_DESCEND and abs(z - self._descend_z()) <= reached:
             self._rtl_leg = RTL_LOITER
             self._rtl_loiter_since = status.time_s
         if self._rtl_leg == RTL_LOITER:
             delay = self.params["RTL_LAND_DELAY"]
             if delay >= 0 and status.time_s - self._rtl_loiter_since >= delay:
-                self._rtl_leg = RTL_LAND
-                self._land_xy = (hx, hy)
-                self._say(mavlink.MAV_SEVERITY_INFO, "Return: landing at home" if self._rtl_rally is None
-                          else f"Return: landing at rally point {self._rtl_rally}")
+                self._return_lands()
+
+    def _return_lands(self) -> None:
+        self._rtl_leg = RTL_LAND
+        self._land_xy = self._rtl_plan.destination
+        self._say(mavlink.MAV_SEVERITY_INFO, f"Return: {self._rtl_plan.landing}")
 
     def _begin_mission_item(self, status: VehicleStatus) -> None:
         item = self.mission[self.mission_seq]
         x, y, z = status.position
+        if item.command == DO_LAND_START:      # a marker: nothing to fly (the last item: hold where it is)
+            self._mission_target = status.position
+            self._next_mission_item(status, reached=True)
+            return
         if item.command == NAV_RETURN_TO_LAUNCH:
             self._mission_item_reached(status)
             if status.landed:  # nothing to return from: the mission ends here

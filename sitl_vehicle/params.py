@@ -3,7 +3,9 @@
 Every parameter here is read by the code that flies the vehicle: commander parameters are read on each
 update, and controller/planner parameters are pushed into the vehicle core's config objects through the
 ``on_change`` hook, so a PARAM_SET from a ground station changes behaviour at once, as on PX4. Values
-travel as MAV_PARAM_TYPE_REAL32.
+travel as PX4 sends them: MAV_PARAM_TYPE_REAL32, or MAV_PARAM_TYPE_INT32 for the ones PX4 keeps as integers
+(enumerations, bitmasks and a few counts), their bytes in the message's float field (PX4's bytewise encoding,
+done at the MAVLink edge, :mod:`sitl_vehicle.mavlink_io`).
 """
 
 from __future__ import annotations
@@ -11,6 +13,8 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
+
+INTEGER_UNITS = ("enum", "bitmask")  # parameters with these units are INT32 in PX4
 
 
 @dataclass(frozen=True)
@@ -21,6 +25,12 @@ class ParamSpec:
     maximum: float
     unit: str
     description: str
+    whole: bool = False  # INT32 in PX4 though neither an enumeration nor a bitmask (an id, whole seconds)
+
+    @property
+    def integer(self) -> bool:
+        """Kept as an integer, as PX4 keeps it (INT32 over MAVLink)."""
+        return self.whole or self.unit in INTEGER_UNITS
 
 
 class ParameterError(ValueError):
@@ -68,6 +78,8 @@ class ParameterStore:
         value = float(value)
         if not math.isfinite(value):
             raise ParameterError(f"{name}: value must be finite, got {value}")
+        if spec.integer and value != int(value):
+            raise ParameterError(f"{name}: {value:g} is not a whole number; it is an integer parameter")
         if not spec.minimum <= value <= spec.maximum:
             raise ParameterError(f"{name}: {value:g} is outside [{spec.minimum:g}, {spec.maximum:g}] {spec.unit}")
         self._values[name] = value
@@ -92,13 +104,17 @@ COMMANDER_PARAMS = [
     ParamSpec("NAV_ACC_RAD", 0.1, 0.02, 5.0, "m", "Acceptance radius of Takeoff and Return waypoints"),
     ParamSpec("NAV_DLL_ACT", 0.0, 0.0, 6.0, "enum", "Ground-station link loss action: 0 = none, 1 = Hold, "
               "2 = Return, 3 = Land, 5/6 = stop the motors (terminate/disarm)"),
-    ParamSpec("COM_DL_LOSS_T", 10.0, 1.0, 300.0, "s", "Ground-station heartbeat timeout before the link is lost"),
+    ParamSpec("COM_DL_LOSS_T", 10.0, 1.0, 300.0, "s", "Ground-station heartbeat timeout before the link is lost",
+              whole=True),
     ParamSpec("GF_ACTION", 2.0, 0.0, 5.0, "enum", "Geofence breach action: 0 = none, 1 = warning, 2 = Hold, "
               "3 = Return, 4 = terminate (motors stopped), 5 = Land"),
     ParamSpec("GF_MAX_HOR_DIST", 0.0, 0.0, 10000.0, "m", "Geofence: largest distance from home (0: no limit)"),
     ParamSpec("GF_MAX_VER_DIST", 0.0, 0.0, 10000.0, "m", "Geofence: largest height above home (0: no limit)"),
     ParamSpec("COM_DLL_EXCEPT", 0.0, 0.0, 7.0, "bitmask", "Modes where ground-station link loss is only "
               "reported: 1 Mission, 2 Hold/Takeoff/Land/Return, 4 Offboard (it never acts in Land)"),
+    ParamSpec("RTL_TYPE", 0.0, 0.0, 3.0, "enum", "Return to: 0 = home or the nearest rally point, 1 = the nearest "
+              "rally point or mission landing (home only with neither), 2 = along the mission to its landing (or back "
+              "along it to home), 3 = the nearest of home, a rally point and the mission landing"),
     ParamSpec("RTL_RETURN_ALT", 60.0, 0.0, 150.0, "m", "Return: climb to at least this altitude above home"),
     ParamSpec("RTL_DESCEND_ALT", 30.0, 0.5, 100.0, "m", "Return: descend to this altitude above home, then land"),
     ParamSpec("RTL_LAND_DELAY", 0.0, -1.0, 300.0, "s", "Return: hover this long above home before landing "
@@ -132,7 +148,7 @@ COMMANDER_PARAMS = [
     ParamSpec("MC_ACRO_EXPO_Y", 0.69, 0.0, 1.0, "-", "Acro: yaw stick expo (0 linear, 1 cubic)"),
     ParamSpec("MC_ACRO_SUPEXPO", 0.7, 0.0, 0.95, "-", "Acro: roll and pitch SuperExpo (0 plain expo)"),
     ParamSpec("MC_ACRO_SUPEXPOY", 0.7, 0.0, 0.95, "-", "Acro: yaw SuperExpo (0 plain expo)"),
-    ParamSpec("SYS_AUTOSTART", 4001.0, 0.0, 1e6, "", "Airframe id (4001: generic quadrotor X)"),
+    ParamSpec("SYS_AUTOSTART", 4001.0, 0.0, 1e6, "", "Airframe id (4001: generic quadrotor X)", whole=True),
 ]
 
 

@@ -170,7 +170,7 @@ def stream_message(name: str, t: Telemetry, home: Home, commander: Commander, bo
         return mavlink.MAVLink_system_time_message(int((boot_wall + t.time_s) * 1e6), boot_ms)
     if name == "AUTOPILOT_VERSION":
         caps = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+                | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT)
         # flight_sw_version 1.15.0 official, as PX4 encodes it (major<<24 | minor<<16 | patch<<8 | type)

@@ -64,10 +64,10 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "sitl_vehicle.dynamics": (["sitl_vehicle/dynamics.py"],
                               ["tests/sitl_vehicle/test_dynamics.py", "tests/sitl_vehicle/test_wind.py"]),
     "sitl_vehicle.commander": ([f"sitl_vehicle/{m}.py" for m in ("commander", "failsafes", "navigator", "stick_modes",
-                                                                  "geofence")],
+                                                                  "geofence", "return_plan")],
                                [f"tests/sitl_vehicle/test_{t}.py" for t in ("commander", "takeoff", "mission",
                                                                             "manual", "acro", "geofence",
-                                                                            "rally")]),
+                                                                            "rally", "return_types")]),
 }
 
 STAGING_PYPROJECT = """\

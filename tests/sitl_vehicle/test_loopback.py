@@ -9,6 +9,7 @@ import time
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_vehicle.mavlink_io import int_as_param_float, param_float_as_int
 from support.mavclient import MavClient, px4_mode_name, wait_sim, wait_streamed, wait_until
 
 ALT = 1.5
@@ -231,14 +232,18 @@ def test_parameters_list_set_and_takeoff_altitude(make_vehicle):
     server, client = make_vehicle()
     with client.lock:
         client.conn.mav.param_request_list_send(1, 1)
-    names = set()
+    types = {}
     deadline = time.monotonic() + 5
-    while time.monotonic() < deadline and len(names) < len(server.params):
+    while time.monotonic() < deadline and len(types) < len(server.params):
         msg = client.recv("PARAM_VALUE", 1)
         if msg:
-            names.add(msg.param_id)
-            assert msg.param_type == mavlink.MAV_PARAM_TYPE_REAL32 and msg.param_count == len(server.params)
-    assert names == set(server.params.names())
+            types[msg.param_id] = msg.param_type
+            assert msg.param_count == len(server.params)
+    assert set(types) == set(server.params.names())
+    integers = {name for name, kind in types.items() if kind == mavlink.MAV_PARAM_TYPE_INT32}
+    assert {"RTL_TYPE", "NAV_DLL_ACT", "COM_RC_OVERRIDE", "SYS_AUTOSTART", "COM_DL_LOSS_T"} <= integers   # as PX4's
+    assert "MIS_TAKEOFF_ALT" not in integers and set(types.values()) == {mavlink.MAV_PARAM_TYPE_INT32,
+                                                                          mavlink.MAV_PARAM_TYPE_REAL32}
     with client.lock:
         client.conn.mav.param_set_send(1, 1, b"MIS_TAKEOFF_ALT", 1.2, mavlink.MAV_PARAM_TYPE_REAL32)
     echo = client.recv("PARAM_VALUE", 3, lambda m: m.param_id == "MIS_TAKEOFF_ALT")
@@ -247,6 +252,19 @@ def test_parameters_list_set_and_takeoff_altitude(make_vehicle):
         client.conn.mav.param_set_send(1, 1, b"MIS_TAKEOFF_ALT", -5.0, mavlink.MAV_PARAM_TYPE_REAL32)
     echo = client.recv("PARAM_VALUE", 3, lambda m: m.param_id == "MIS_TAKEOFF_ALT")
     assert abs(echo.param_value - 1.2) < 1e-6
+    # Integers travel as PX4 sends them: their bytes in the float field; the wrong type is refused with the fix.
+    with client.lock:
+        client.conn.mav.param_set_send(1, 1, b"RTL_TYPE", int_as_param_float(3), mavlink.MAV_PARAM_TYPE_INT32)
+    echo = client.recv("PARAM_VALUE", 3, lambda m: m.param_id == "RTL_TYPE")
+    assert echo.param_type == mavlink.MAV_PARAM_TYPE_INT32 and param_float_as_int(echo.param_value, 6) == 3
+    assert server.params["RTL_TYPE"] == 3.0
+    for name, value, kind in ((b"RTL_TYPE", 1.0, mavlink.MAV_PARAM_TYPE_REAL32),
+                              (b"MIS_TAKEOFF_ALT", int_as_param_float(2), mavlink.MAV_PARAM_TYPE_INT32)):
+        with client.lock:
+            client.conn.mav.param_set_send(1, 1, name, value, kind)
+        fix = "send MAV_PARAM_TYPE_INT32" if kind == mavlink.MAV_PARAM_TYPE_REAL32 else "send MAV_PARAM_TYPE_REAL32"
+        assert fix in client.statustext(f"{name.decode()} is a", 3)
+    assert server.params["RTL_TYPE"] == 3.0 and server.params["MIS_TAKEOFF_ALT"] == pytest.approx(1.2)
     # Controller and planner parameters reach the vehicle core at once (PX4 names, PX4 units).
     with client.lock:
         client.conn.mav.param_set_send(1, 1, b"MPC_XY_CRUISE", 1.25, mavlink.MAV_PARAM_TYPE_REAL32)

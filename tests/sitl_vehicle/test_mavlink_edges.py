@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import struct
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.__main__ import build_parser, config_from_args
-from sitl_vehicle.mavlink_io import Home
+from sitl_vehicle.mavlink_io import Home, int_as_param_float, param_float_as_int
+from sitl_vehicle.params import ParameterError
 from sitl_vehicle.server import ServerConfig, VehicleServer
 from sitl_vehicle.sim import VehicleConfig
 
@@ -150,6 +152,29 @@ def test_param_request_read_by_name_and_by_index(vehicle):
     assert by_name.param_index == names.index("MPC_LAND_SPEED") and by_name.param_count == len(names)
     assert by_index.param_id == names[3] and by_index.param_index == 3
     assert by_index.param_type == mavlink.MAV_PARAM_TYPE_REAL32
+
+
+@pytest.mark.parametrize("value, kind", [(3, mavlink.MAV_PARAM_TYPE_INT32), (4001, mavlink.MAV_PARAM_TYPE_UINT32),
+                                         (-2, mavlink.MAV_PARAM_TYPE_INT8), (200, mavlink.MAV_PARAM_TYPE_UINT8),
+                                         (-300, mavlink.MAV_PARAM_TYPE_INT16), (60000, mavlink.MAV_PARAM_TYPE_UINT16)])
+def test_an_integer_parameter_travels_as_its_bytes_in_the_float_field(value, kind):
+    size = {mavlink.MAV_PARAM_TYPE_INT8: 1, mavlink.MAV_PARAM_TYPE_UINT8: 1, mavlink.MAV_PARAM_TYPE_INT16: 2,
+            mavlink.MAV_PARAM_TYPE_UINT16: 2}.get(kind, 4)
+    field = struct.unpack("<f", value.to_bytes(size, "little", signed=value < 0).ljust(4, b"\0"))[0]
+    assert param_float_as_int(field, kind) == value
+    assert param_float_as_int(int_as_param_float(value), mavlink.MAV_PARAM_TYPE_INT32) == value
+    assert int_as_param_float(1) == struct.unpack("<f", b"\x01\0\0\0")[0]          # 1.4e-45, not 1.0
+
+
+def test_integer_parameters_take_whole_numbers_only_and_say_so(vehicle):
+    server, cap = vehicle
+    with pytest.raises(ParameterError, match="RTL_TYPE: 1.5 is not a whole number; it is an integer parameter"):
+        server.params.set("RTL_TYPE", 1.5)
+    assert server.params.set("RTL_TYPE", 2.0) == 2.0 and server.params.set("MIS_TAKEOFF_ALT", 1.5) == 1.5
+    handle(server, mavlink.MAVLink_param_set_message(1, 1, b"RTL_TYPE", int_as_param_float(7),
+                                                     mavlink.MAV_PARAM_TYPE_INT32))   # out of range: kept, echoed
+    echo = cap.of("PARAM_VALUE")[-1]
+    assert param_float_as_int(echo.param_value, echo.param_type) == 2 and server.params["RTL_TYPE"] == 2.0
 
 
 # ------------------------------------------------------------------------------------------------ streams

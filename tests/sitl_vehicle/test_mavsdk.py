@@ -92,6 +92,22 @@ def test_mavsdk_connect_health_arm_takeoff_offboard_return_land(px4_system):
     assert server.sim.truth.position[2] > -0.05 and not server.sim.crashed
 
 
+def test_mavsdk_sets_and_reads_integer_parameters_as_on_px4(px4_system):
+    """PX4 keeps enumerations as INT32 and MAVSDK reads them bytewise: set_param_int works, a float is the wrong
+    type (MAVSDK refuses it and the vehicle keeps its value)."""
+    server, system = px4_system
+    param = Param(system)
+    param.set_param_int("RTL_TYPE", 2)
+    assert param.get_param_int("RTL_TYPE") == 2 and server.params["RTL_TYPE"] == 2.0
+    assert param.get_param_int("SYS_AUTOSTART") == 4001
+    with pytest.raises(mavsdk.plugins.param.ParamError, match="WRONG_TYPE"):
+        param.set_param_float("RTL_TYPE", 1.0)
+    assert server.params["RTL_TYPE"] == 2.0 and param.get_param_float("MIS_TAKEOFF_ALT") == pytest.approx(2.5)
+    every = param.get_all_params()
+    assert {"RTL_TYPE", "GF_ACTION", "NAV_DLL_ACT"} <= {p.name for p in every.int_params}
+    assert "RTL_RETURN_ALT" in {p.name for p in every.float_params}
+
+
 def test_mavsdk_manual_control_position_and_altitude_modes(px4_system):
     """MAVSDK's manual_control example: stream joystick input, start Position control, arm, climb, switch to
     Altitude control, land."""
