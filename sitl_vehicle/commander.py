@@ -6,9 +6,9 @@ arrive and ``update`` once per control tick with the vehicle's status; it answer
 vehicle core must fly. STATUSTEXT lines it wants sent are queued in ``messages``.
 
 Three parts have modules of their own, mixed into :class:`Commander`: the link-loss failsafes and the
-pilot's stick takeover (``sitl_vehicle.failsafes``), Return's legs and a mission's items
-(``sitl_vehicle.navigator``) and the stick modes' setpoints (``sitl_vehicle.stick_modes``). Their constants
-are importable from here too, as before the split.
+pilot's stick takeover (``sitl_vehicle.failsafes``), Return's legs, a mission's items and the requests that load
+and start one (``sitl_vehicle.navigator``) and the stick modes' setpoints (``sitl_vehicle.stick_modes``). Their
+constants, and the types in ``sitl_vehicle.commander_types``, are importable from here too, as before the split.
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_vehicle.commander_types import ACCEPTED, CommanderOutput, Reply, VehicleStatus
 from sitl_vehicle.failsafes import (
     AUTO_MODES,
     DLL_ACTIONS,
@@ -37,7 +37,7 @@ from sitl_vehicle.failsafes import (
 )
 from sitl_vehicle.geofence import Geofence, RallyItem
 from sitl_vehicle.manual import Sticks
-from sitl_vehicle.mission import MissionItem, mission_landing
+from sitl_vehicle.mission import MissionItem
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.navigator import (
     MIS_CLIMB,
@@ -75,41 +75,6 @@ TAKEOFF_ALT_SILENT_MARGIN = 0.1
 # Stabilized or Manual mode unless the throttle is low
 ARM_THROTTLE_MAX = 0.6
 ARM_THROTTLE_LOW = 0.2
-
-
-@dataclass(frozen=True)
-class VehicleStatus:
-    """What the commander may know about the vehicle: the estimate, not the truth."""
-
-    time_s: float
-    position: tuple[float, float, float]
-    velocity: tuple[float, float, float]
-    yaw: float
-    armed: bool
-    landed: bool
-    crashed: bool = False
-    position_valid: bool = True
-
-
-@dataclass(frozen=True)
-class Reply:
-    result: int  # MAV_RESULT
-    text: str | None = None  # reason, also sent as STATUSTEXT when the command is refused
-    announced: bool = False  # the commander has queued the STATUSTEXT already (``messages``)
-
-    @property
-    def accepted(self) -> bool:
-        return self.result == mavlink.MAV_RESULT_ACCEPTED
-
-
-ACCEPTED = Reply(mavlink.MAV_RESULT_ACCEPTED)
-
-
-@dataclass(frozen=True)
-class CommanderOutput:
-    armed: bool
-    setpoint: Setpoint | ManualSetpoint
-    mode: FlightMode
 
 
 class Commander(Failsafes, Navigator, StickModes):
@@ -162,12 +127,13 @@ class Commander(Failsafes, Navigator, StickModes):
         self.mission_reached: deque[int] = deque(maxlen=64)  # items reached, for MISSION_ITEM_REACHED
         self._mission_phase = MIS_DONE
         self._mission_target: tuple[float, float, float] = (NAN, NAN, NAN)
+        self._mission_speed = NAN  # the horizontal speed a DO_CHANGE_SPEED set (NaN: MPC_XY_CRUISE)
         self._mission_since = 0.0
         self._mission_complete = False
         self.geofence = Geofence()
         self._geofence_breached = False  # the geofence failsafe acted on this breach already
         self.rally_points: tuple[RallyItem, ...] = ()
-        self._rtl_plan = ReturnPlan((0.0, 0.0), "flying home", "landing at home")  # where and how Return flies
+        self._rtl_plan: ReturnPlan | None = None  # where and how Return flies (set as it begins)
         self._rtl_path_index = 0  # the point of its path being flown to
 
     # ----------------------------------------------------------------------------------- requests
@@ -279,48 +245,6 @@ class Commander(Failsafes, Navigator, StickModes):
         self._offboard_setpoint = setpoint
         self._offboard_time = time_s
 
-    def set_mission(self, items: list[MissionItem], status: VehicleStatus) -> None:
-        """A new mission (uploaded whole; empty clears it). Flying the old one, the vehicle holds instead."""
-        self.mission = tuple(items)
-        self.mission_seq = 0
-        self._mission_phase = MIS_DONE
-        self._mission_complete = False
-        if self.mode is FlightMode.AUTO_MISSION:
-            self._say(mavlink.MAV_SEVERITY_WARNING, "Mission changed in flight: switching to Hold")
-            self._enter(FlightMode.AUTO_LOITER, status)
-
-    def set_mission_current(self, seq: int, status: VehicleStatus) -> Reply:
-        """MISSION_SET_CURRENT: continue from item ``seq`` (at once when flying the mission)."""
-        if not 0 <= seq < len(self.mission):
-            return self._refuse(mavlink.MAV_RESULT_DENIED, f"Mission item {seq} does not exist (the mission has "
-                                                           f"{len(self.mission)} items)")
-        self.mission_seq = seq
-        self._mission_complete = False  # entering Mission mode continues from here rather than from item 0
-        if self.mode is FlightMode.AUTO_MISSION:
-            self._begin_mission_item(status)
-        return ACCEPTED
-
-    def start_mission(self, status: VehicleStatus, first: int = 0) -> Reply:
-        """MAV_CMD_MISSION_START: Mission mode from item ``first``."""
-        if self.mission and not 0 <= first < len(self.mission):
-            return self._refuse(mavlink.MAV_RESULT_DENIED, f"Mission start denied: no item {first}")
-        if self.mission:
-            self.mission_seq = first
-            self._mission_complete = False  # start from `first` rather than from the beginning
-        return self.set_mode(FlightMode.AUTO_MISSION, status)
-
-    def start_mission_landing(self, status: VehicleStatus) -> Reply:
-        """MAV_CMD_DO_LAND_START: Mission mode from where the mission's landing starts, as PX4 jumps to it."""
-        landing = mission_landing(self.mission)
-        if landing is None:
-            return self._refuse(mavlink.MAV_RESULT_DENIED, "Landing sequence denied: the mission has no landing "
-                                                           "(upload one with DO_LAND_START or NAV_LAND)")
-        return self.start_mission(status, landing[0])
-
-    @property
-    def mission_finished(self) -> bool:
-        return bool(self.mission) and self._mission_complete
-
     def manual_control(self, sticks: Sticks, time_s: float) -> None:
         """Stick input arrived (MANUAL_CONTROL; the MAVLink edge has already rejected malformed ones)."""
         self._sticks = sticks
@@ -388,7 +312,7 @@ class Commander(Failsafes, Navigator, StickModes):
         if self.mode is FlightMode.AUTO_RTL and not self.landing:
             return Setpoint(position=self._return_target(), yaw=self._hold_yaw)
         if self.mode is FlightMode.AUTO_MISSION and not self.landing and self._climb_requested():
-            return Setpoint(position=self._mission_target, yaw=self._hold_yaw)
+            return Setpoint(position=self._mission_target, yaw=self._hold_yaw, cruise_speed=self._mission_speed)
         if self.mode.manual and self._sticks is not None and (not status.landed or self._climb_requested()
                                                               or self.mode.thrust_from_throttle):
             return self._stick_setpoint(status)
@@ -427,8 +351,10 @@ class Commander(Failsafes, Navigator, StickModes):
             self._land_xy = status.position[:2]
         elif mode is FlightMode.AUTO_MISSION:
             if self._mission_complete:
-                self.mission_seq = 0  # a finished mission starts again from its first item
+                self.mission_seq = 0  # a finished mission starts again from its first item, at the default speed
                 self._mission_complete = False
+                self._mission_speed = NAN
+            self._mission_target = (NAN, NAN, NAN)  # nothing flown to yet in this mode
             self._begin_mission_item(status)
         elif mode.manual:
             self._stick_hold_xy = self._stick_hold_z = None  # set from the state when the sticks are centred

@@ -16,14 +16,40 @@ from pymavlink.dialects.v20 import common as mavlink
 
 # the MAV_CMDs a mission may hold, with PX4's names
 NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
+NAV_LOITER_TIME = mavlink.MAV_CMD_NAV_LOITER_TIME  # a multicopter holds at its place for param1 s
+NAV_DELAY = mavlink.MAV_CMD_NAV_DELAY  # holds where the vehicle is for param1 s (MAVSDK's loiter_time_s)
 NAV_RETURN_TO_LAUNCH = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
 NAV_LAND = mavlink.MAV_CMD_NAV_LAND
 NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
 DO_LAND_START = mavlink.MAV_CMD_DO_LAND_START  # marks where the mission's landing begins (flown past in Mission)
-SUPPORTED_COMMANDS = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_RETURN_TO_LAUNCH: "NAV_RETURN_TO_LAUNCH",
-                      NAV_LAND: "NAV_LAND", NAV_TAKEOFF: "NAV_TAKEOFF", DO_LAND_START: "DO_LAND_START"}
-# items that may leave out a place: "here" for a Takeoff or Land, and a marker with nowhere of its own
-UNPLACED_COMMANDS = (NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH, DO_LAND_START)
+DO_CHANGE_SPEED = mavlink.MAV_CMD_DO_CHANGE_SPEED  # param2: the horizontal speed of the items after it (m/s)
+SPEED_NO_CHANGE, SPEED_DEFAULT = -1.0, -2.0        # DO_CHANGE_SPEED's param2 for "no change" and "back to default"
+SPEED_TYPES_HORIZONTAL = (0.0, 1.0)                # param1: air speed or ground speed (a multicopter's the same)
+# camera and gimbal items (as MAVSDK's Mission plugin and QGroundControl add them): PX4 hands them to a payload;
+# the simulated vehicle carries none, so Mission mode flies past them, and the upload says so
+PAYLOAD_COMMANDS = {mavlink.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW: "DO_GIMBAL_MANAGER_PITCHYAW",
+                    mavlink.MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE: "DO_GIMBAL_MANAGER_CONFIGURE",
+                    mavlink.MAV_CMD_DO_MOUNT_CONTROL: "DO_MOUNT_CONTROL",
+                    mavlink.MAV_CMD_DO_MOUNT_CONFIGURE: "DO_MOUNT_CONFIGURE",
+                    mavlink.MAV_CMD_IMAGE_START_CAPTURE: "IMAGE_START_CAPTURE",
+                    mavlink.MAV_CMD_IMAGE_STOP_CAPTURE: "IMAGE_STOP_CAPTURE",
+                    mavlink.MAV_CMD_VIDEO_START_CAPTURE: "VIDEO_START_CAPTURE",
+                    mavlink.MAV_CMD_VIDEO_STOP_CAPTURE: "VIDEO_STOP_CAPTURE",
+                    mavlink.MAV_CMD_DO_SET_CAM_TRIGG_DIST: "DO_SET_CAM_TRIGG_DIST",
+                    mavlink.MAV_CMD_SET_CAMERA_MODE: "SET_CAMERA_MODE",
+                    mavlink.MAV_CMD_SET_CAMERA_ZOOM: "SET_CAMERA_ZOOM",
+                    mavlink.MAV_CMD_SET_CAMERA_FOCUS: "SET_CAMERA_FOCUS",
+                    mavlink.MAV_CMD_DO_TRIGGER_CONTROL: "DO_TRIGGER_CONTROL",
+                    mavlink.MAV_CMD_DO_DIGICAM_CONTROL: "DO_DIGICAM_CONTROL"}
+SUPPORTED_COMMANDS = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_LOITER_TIME: "NAV_LOITER_TIME", NAV_DELAY: "NAV_DELAY",
+                      NAV_RETURN_TO_LAUNCH: "NAV_RETURN_TO_LAUNCH", NAV_LAND: "NAV_LAND", NAV_TAKEOFF: "NAV_TAKEOFF",
+                      DO_LAND_START: "DO_LAND_START", DO_CHANGE_SPEED: "DO_CHANGE_SPEED", **PAYLOAD_COMMANDS}
+# items with nothing to fly to: Mission mode acts on them (or not) and goes on to the next at once
+DO_COMMANDS = (DO_LAND_START, DO_CHANGE_SPEED, *PAYLOAD_COMMANDS)
+# items with no place of their own: they may come in MAV_FRAME_MISSION, the frame of commands, and without altitude
+PLACELESS_COMMANDS = (NAV_DELAY, *DO_COMMANDS)
+# items that may leave out a place: "here" for a Takeoff or Land, and the placeless ones
+UNPLACED_COMMANDS = (NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH, *PLACELESS_COMMANDS)
 # frames: altitude relative to home, or above mean sea level
 RELATIVE_FRAMES = (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 AMSL_FRAMES = (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT)
@@ -72,8 +98,8 @@ class PlanItem:
 @dataclass(frozen=True)
 class MissionItem(PlanItem):
     """One checked mission item (``north``/``east`` NaN: where the vehicle is, for a Takeoff or Land without
-    coordinates); ``alt_relative`` says whether ``alt`` is above home (else above mean sea level, ``amsl_down``
-    locally)."""
+    coordinates, or nowhere, for an item with nothing to fly to); ``alt_relative`` says whether ``alt`` is above
+    home (else above mean sea level, ``amsl_down`` locally)."""
 
     alt_relative: bool
     amsl_down: float  # for an altitude above mean sea level: its local down coordinate
@@ -85,8 +111,18 @@ class MissionItem(PlanItem):
 
     @property
     def hold_s(self) -> float:
-        """NAV_WAYPOINT param1: seconds to hold at the waypoint."""
-        return self.params[0] if self.command == NAV_WAYPOINT and self.params[0] > 0 else 0.0
+        """NAV_WAYPOINT's, NAV_LOITER_TIME's and NAV_DELAY's param1: seconds to hold at the item."""
+        return (self.params[0] if self.command in (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_DELAY) and self.params[0] > 0
+                else 0.0)
+
+    @property
+    def speed(self) -> float | None:
+        """DO_CHANGE_SPEED: the horizontal speed (m/s) of the items after it, NaN for the default, None for no
+        change (or a climb or descent speed, which the vehicle does not model)."""
+        if self.command != DO_CHANGE_SPEED or self.params[1] == SPEED_NO_CHANGE \
+                or self.params[0] not in SPEED_TYPES_HORIZONTAL:
+            return None
+        return math.nan if self.params[1] == SPEED_DEFAULT else self.params[1]
 
     @property
     def acceptance_radius(self) -> float:
@@ -95,8 +131,8 @@ class MissionItem(PlanItem):
 
     @property
     def yaw(self) -> float:
-        """param4, the heading to fly (rad; NaN: keep the heading)."""
-        yaw = self.params[3]
+        """param4, the heading to fly (rad; NaN: keep the heading), for the items whose param4 is one."""
+        yaw = self.params[3] if self.command in (NAV_WAYPOINT, NAV_TAKEOFF, NAV_LAND) else math.nan
         return math.radians(yaw) if math.isfinite(yaw) else math.nan
 
     def down(self, home_down: float) -> float:
@@ -120,14 +156,24 @@ def mission_item_from_message(msg, to_local) -> MissionItem:
         raise MissionError(mavlink.MAV_MISSION_UNSUPPORTED,
                            f"{where}: command {msg.command} is not supported; use "
                            + ", ".join(f"{name} ({cmd})" for cmd, name in SUPPORTED_COMMANDS.items()))
-    if msg.command == DO_LAND_START and msg.frame == mavlink.MAV_FRAME_MISSION:
-        lat, lon, placed = 0.0, 0.0, False   # a marker with no place of its own, in the frame of commands
+    if msg.command in PLACELESS_COMMANDS and msg.frame == mavlink.MAV_FRAME_MISSION:
+        # no place: param5 and param6 are the command's own (a gimbal's flags, say), kept to be sent back as they came
+        scale = 1e-7 if msg.get_type() == "MISSION_ITEM_INT" else 1.0
+        lat, lon, placed = msg.x * scale, msg.y * scale, False
     else:
         lat, lon, placed = global_position(msg, where)
     alt = float(msg.z)
     params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))  # NaN: the default
-    if not math.isfinite(alt):
+    if not math.isfinite(alt) and msg.command not in PLACELESS_COMMANDS:
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM7, f"{where}: altitude is {alt}; send metres")
+    if msg.command == NAV_DELAY and not (math.isfinite(params[0]) and params[0] >= 0):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
+                           f"{where}: NAV_DELAY's delay (param1) is {params[0]}; send seconds, 0 or more (a time of "
+                           "day to wait for is not supported)")
+    if msg.command == DO_CHANGE_SPEED and not (params[1] > 0 or params[1] in (SPEED_NO_CHANGE, SPEED_DEFAULT)):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM2,
+                           f"{where}: DO_CHANGE_SPEED's speed (param2) is {params[1]}; send m/s above 0, -1 (no "
+                           "change) or -2 (the default)")
     amsl_down = to_local(0.0, 0.0, alt)[2] if msg.frame in AMSL_FRAMES else math.nan
     if not placed and msg.command in UNPLACED_COMMANDS:
         north = east = math.nan  # "here", as PX4 reads a Takeoff or Land without coordinates
@@ -175,3 +221,16 @@ def mission_landing(items) -> tuple[int, int] | None:
             if after:
                 return start, after[0]
     return (lands[0], lands[0]) if lands else None
+
+
+def passed_items_note(items) -> str | None:
+    """A line saying which items of an accepted mission the vehicle flies past without acting on them (a camera's,
+    a gimbal's, a climb or descent speed), or None: an upload never drops what it cannot do in silence."""
+    passed = [item for item in items if item.command in PAYLOAD_COMMANDS
+              or (item.command == DO_CHANGE_SPEED and item.params[0] not in SPEED_TYPES_HORIZONTAL)]
+    if not passed:
+        return None
+    names = sorted({item.name if item.command != DO_CHANGE_SPEED else "DO_CHANGE_SPEED of a climb or descent speed"
+                    for item in passed})
+    return (f"Mission: {len(passed)} item{'s' if len(passed) > 1 else ''} with nothing to act on here (no camera, "
+            f"gimbal or climb speed model), flown past: {', '.join(names)}")

@@ -24,7 +24,7 @@ from sitl_vehicle.geofence import (
     geofence_from_items,
     rally_item_from_message,
 )
-from sitl_vehicle.mission import MAX_ITEMS, MissionError, MissionItem, mission_item_from_message
+from sitl_vehicle.mission import MAX_ITEMS, MissionError, MissionItem, mission_item_from_message, passed_items_note
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.udp_link import UdpLink
 
@@ -131,6 +131,10 @@ class MissionProtocol:
         self._mission_ack(link, msg, mavlink.MAV_MISSION_ACCEPTED, mission_type)
         self.statustext(mavlink.MAV_SEVERITY_INFO, f"{_plan(mission_type)} accepted: {len(upload['items'])} items",
                         link)
+        note = passed_items_note(upload["items"]) if mission_type == mavlink.MAV_MISSION_TYPE_MISSION else None
+        if note:
+            log.info("%s", note)
+            self.statustext(mavlink.MAV_SEVERITY_INFO, note, link)
 
     _on_mission_item = _on_mission_item_int  # the older float form (lat/lon in degrees) is read the same way
 

@@ -1,4 +1,5 @@
-"""Navigator: how Return and Mission mode fly, leg by leg and item by item, as PX4's navigator does.
+"""Navigator: how Return and Mission mode fly, leg by leg and item by item, as PX4's navigator does, and the
+requests that load and start a mission.
 
 :class:`Navigator` is a mixin of :class:`sitl_vehicle.commander.Commander` (it reads and sets the commander's
 state and calls its ``_enter``, ``_say`` and ``_mission_item_reached``): Return's legs (climb, fly home, descend,
@@ -10,16 +11,21 @@ to hand a mission's Return item to Return mode.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.mission import DO_LAND_START, NAV_LAND, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF
+from sitl_vehicle.commander_types import ACCEPTED, Reply, VehicleStatus
+from sitl_vehicle.mission import (
+    DO_COMMANDS,
+    NAV_DELAY,
+    NAV_LAND,
+    NAV_RETURN_TO_LAUNCH,
+    NAV_TAKEOFF,
+    MissionItem,
+    mission_landing,
+)
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.return_plan import plan_return
-
-if TYPE_CHECKING:
-    from sitl_vehicle.commander import VehicleStatus
 
 # Return mode's legs, in order (PX4's RTL: climb, the plan's path (a mission's items), fly to the destination at
 # the altitude reached, descend, wait, land; a mission's landing lands straight after the flight there)
@@ -32,6 +38,50 @@ MIS_CLIMB, MIS_FLY, MIS_HOLD, MIS_LAND, MIS_DONE = "climb", "fly", "hold", "land
 
 class Navigator:
     """Return's legs and a mission's items, mixed into ``Commander``."""
+
+    def set_mission(self, items: list[MissionItem], status: VehicleStatus) -> None:
+        """A new mission (uploaded whole; empty clears it). Flying the old one, the vehicle holds instead."""
+        self.mission = tuple(items)
+        self.mission_seq = 0
+        self._mission_speed = math.nan  # MPC_XY_CRUISE until a DO_CHANGE_SPEED
+        self._mission_phase = MIS_DONE
+        self._mission_complete = False
+        if self.mode is FlightMode.AUTO_MISSION:
+            self._say(mavlink.MAV_SEVERITY_WARNING, "Mission changed in flight: switching to Hold")
+            self._enter(FlightMode.AUTO_LOITER, status)
+
+    def set_mission_current(self, seq: int, status: VehicleStatus) -> Reply:
+        """MISSION_SET_CURRENT: continue from item ``seq`` (at once when flying the mission)."""
+        if not 0 <= seq < len(self.mission):
+            return self._refuse(mavlink.MAV_RESULT_DENIED, f"Mission item {seq} does not exist (the mission has "
+                                                           f"{len(self.mission)} items)")
+        self.mission_seq = seq
+        self._mission_complete = False  # entering Mission mode continues from here rather than from item 0
+        if self.mode is FlightMode.AUTO_MISSION:
+            self._mission_target = (math.nan, math.nan, math.nan)   # a jump: what was flown to before is behind
+            self._begin_mission_item(status)
+        return ACCEPTED
+
+    def start_mission(self, status: VehicleStatus, first: int = 0) -> Reply:
+        """MAV_CMD_MISSION_START: Mission mode from item ``first``."""
+        if self.mission and not 0 <= first < len(self.mission):
+            return self._refuse(mavlink.MAV_RESULT_DENIED, f"Mission start denied: no item {first}")
+        if self.mission:
+            self.mission_seq = first
+            self._mission_complete = False  # start from `first` rather than from the beginning
+        return self.set_mode(FlightMode.AUTO_MISSION, status)
+
+    def start_mission_landing(self, status: VehicleStatus) -> Reply:
+        """MAV_CMD_DO_LAND_START: Mission mode from where the mission's landing starts, as PX4 jumps to it."""
+        landing = mission_landing(self.mission)
+        if landing is None:
+            return self._refuse(mavlink.MAV_RESULT_DENIED, "Landing sequence denied: the mission has no landing "
+                                                           "(upload one with DO_LAND_START or NAV_LAND)")
+        return self.start_mission(status, landing[0])
+
+    @property
+    def mission_finished(self) -> bool:
+        return bool(self.mission) and self._mission_complete
 
     def _begin_return(self, status: VehicleStatus, mission_seq: int | None = None) -> None:
         """Return's first leg: climb where the vehicle is to RTL_RETURN_ALT above home (never down), and no higher
@@ -103,9 +153,18 @@ class Navigator:
     def _begin_mission_item(self, status: VehicleStatus) -> None:
         item = self.mission[self.mission_seq]
         x, y, z = status.position
-        if item.command == DO_LAND_START:      # a marker: nothing to fly (the last item: hold where it is)
-            self._mission_target = status.position
+        if item.command in DO_COMMANDS or item.command == NAV_DELAY:
+            # nothing to fly to: the vehicle keeps to the item flown to before (where it is, if none), as PX4 does
+            if not all(map(math.isfinite, self._mission_target)):
+                self._mission_target = status.position
+        if item.command in DO_COMMANDS:         # act, then on to the next (the last: the mission is finished)
+            if item.speed is not None:
+                self._mission_speed = item.speed
             self._next_mission_item(status, reached=True)
+            return
+        if item.command == NAV_DELAY:           # hold for param1 s
+            self._mission_item_reached(status)
+            self._mission_phase, self._mission_since = MIS_HOLD, status.time_s
             return
         if item.command == NAV_RETURN_TO_LAUNCH:
             self._mission_item_reached(status)

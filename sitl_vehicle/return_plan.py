@@ -38,6 +38,11 @@ class ReturnPlan:
     mission_landing: bool = False
 
 
+def _apart(place, position: Point) -> float:
+    """Horizontal distance from ``position`` to ``place`` (north, east first)."""
+    return math.hypot(place[0] - position[0], place[1] - position[1])
+
+
 def _placed(item: MissionItem, home_down: float) -> Point | None:
     """Where a mission item is (a marker flown at the altitude so far), or None for one without a place."""
     if not math.isfinite(item.north):
@@ -53,7 +58,7 @@ def _nearest_item(position: Point, items: tuple[MissionItem, ...]) -> int | None
     placed = [i for i, item in enumerate(items) if math.isfinite(item.north)]
     if not placed:
         return None
-    return min(placed, key=lambda i: math.hypot(items[i].north - position[0], items[i].east - position[1]))
+    return min(placed, key=lambda i: _apart((items[i].north, items[i].east), position))
 
 
 def _via(path: list[Point], climb: bool) -> tuple[Point, ...]:
@@ -83,8 +88,7 @@ def _nearest_safe_point(rtl_type: int, position: Point, home: Point,
                         rally: tuple[RallyItem, ...]) -> tuple[tuple[float, float], int | None]:
     """Home or the nearest rally point, whichever is nearer; RTL_TYPE 1 goes home only with no rally point."""
     if rtl_type == 1 and rally:
-        index = min(range(len(rally)), key=lambda i: math.hypot(rally[i].north - position[0],
-                                                                rally[i].east - position[1]))
+        index = min(range(len(rally)), key=lambda i: _apart((rally[i].north, rally[i].east), position))
         return (rally[index].north, rally[index].east), index
     return nearest_safe_point(position, home, rally)
 
@@ -100,10 +104,8 @@ def plan_return(rtl_type: int, position: Point, home: Point, rally: tuple[RallyI
     entry = _points(mission, range(landing[0], landing[1] + 1), home[2]) if landing and rtl_type != 0 else []
     if not entry:             # no landing to fly to (or one with no place of its own)
         return _safe_point_plan(place, index)
-    safe_nearer = (math.hypot(place[0] - position[0], place[1] - position[1])
-                   < math.hypot(entry[0][0] - position[0], entry[0][1] - position[1]))
-    if safe_nearer and (rally or rtl_type == 3):   # type 1 with no rally point: the landing, never home
-        return _safe_point_plan(place, index)
+    if _apart(place, position) < _apart(entry[0], position) and (rally or rtl_type == 3):
+        return _safe_point_plan(place, index)      # (type 1 with no rally point: the landing, never home)
     start, land = landing
     return _landing_plan(mission, start, land, home[2], position, f"flying to the mission landing at item {start}",
                          True)
@@ -123,7 +125,7 @@ def _along_mission(position: Point, home: Point, mission: tuple[MissionItem, ...
                              f"following the mission from item {first} to its landing", not in_mission)
     last = mission_seq - 1 if in_mission else nearest
     if last is None or last < 0:
-        return ReturnPlan((home[0], home[1]), "flying home", "landing at home")
+        return _safe_point_plan((home[0], home[1]), None)
     path = _points(mission, range(last, -1, -1), home[2])
     return ReturnPlan((home[0], home[1]), f"flying the mission back from item {last}, then home", "landing at home",
                       _via(path, not in_mission), not in_mission)

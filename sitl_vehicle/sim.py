@@ -68,6 +68,8 @@ class Setpoint:
     acceleration: tuple[float, float, float] = NAN3  # m/s^2, NED
     yaw: float = NAN  # rad
     yaw_rate: float = NAN  # rad/s
+    cruise_speed: float = NAN  # m/s, the horizontal speed of the planned move to ``position`` (NaN: MPC_XY_CRUISE;
+                               # at most MPC_XY_VEL_MAX), as a mission's DO_CHANGE_SPEED sets it
 
 
 @dataclass(frozen=True)
@@ -323,6 +325,7 @@ class VehicleSim:
         pos = sp.position
         pmask = (_fin(pos[0]), _fin(pos[1]), _fin(pos[2]))
         if any(pmask):
+            self._plan_at_speed(sp.cruise_speed)
             if not self.planner.active or fresh:
                 vr = self.slew.v_ref
                 v_now = tuple(vr[i] if _fin(vr[i]) else est.velocity[i] for i in range(3))
@@ -340,6 +343,15 @@ class VehicleSim:
                 self.planner.clear()
         if _fin(sp.yaw):
             self._yaw_sp = sp.yaw
+
+    def _plan_at_speed(self, cruise_speed: float) -> None:
+        """The planner's limits for the next move: the configured ones, with a setpoint's cruise speed (capped at
+        the horizontal velocity limit) in place of MPC_XY_CRUISE.  A move already planned keeps its speed."""
+        limits = self.config.planner
+        if _fin(cruise_speed):
+            limits = _replace(limits, v_max_xy=min(cruise_speed, self.config.control.vel_max_xy))
+        if self.planner.config != limits:
+            self.planner.set_config(limits)
 
     # ------------------------------------------------------------------ stepping
     def run(self, duration_s: float) -> None:

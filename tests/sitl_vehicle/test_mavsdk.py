@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import socket
 import threading
 import time
@@ -171,6 +172,37 @@ def test_mavsdk_mission_upload_download_fly_and_land(px4_system):
     action.land()
     wait_for(lambda: not telemetry.armed(), 30, "landing and auto-disarm")
     assert _near(server.sim.truth.position, (0.0, 2.0, 0.0), 0.15) and not server.sim.crashed
+
+
+def test_mavsdk_mission_with_speed_loiter_camera_and_gimbal_items(px4_system):
+    """The items MAVSDK adds for a mission item's speed, loiter time, gimbal and camera action are accepted, read
+    back whole, and flown: the speed from the item on, the loiter held, the payload items flown past."""
+    server, system = px4_system
+    telemetry, action, mission = Telemetry(system), Action(system), Mission(system)
+    home = server.config.home
+    (lat0, lon0, _), (lat1, lon1, _) = home.to_global((1.0, 0.0, 0.0)), home.to_global((4.0, 0.0, 0.0))
+    items = [MissionItem(latitude_deg=lat0, longitude_deg=lon0, relative_altitude_m=1.5, is_fly_through=False,
+                         speed_m_s=0.6, loiter_time_s=1.0, gimbal_pitch_deg=-30.0, gimbal_yaw_deg=0.0,
+                         camera_action=MissionItem.CameraAction.TAKE_PHOTO),
+             MissionItem(latitude_deg=lat1, longitude_deg=lon1, relative_altitude_m=1.5, is_fly_through=False)]
+    wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+    mission.upload_mission(MissionPlan(items))
+    downloaded = mission.download_mission().mission_items
+    assert len(downloaded) == 2 and abs(downloaded[0].speed_m_s - 0.6) < 1e-3
+    assert abs(downloaded[0].loiter_time_s - 1.0) < 1e-3 and abs(downloaded[0].gimbal_pitch_deg + 30.0) < 1e-3
+    assert downloaded[0].camera_action == MissionItem.CameraAction.TAKE_PHOTO
+    action.arm()
+    mission.start_mission()
+    speeds = []
+    while not mission.is_mission_finished():
+        assert len(speeds) < 2000, "the mission did not finish"
+        north = server.sim.truth.position[0]
+        if 1.8 < north < 3.2:                                   # the leg after the speed change, away from its ends
+            speeds.append(math.hypot(*server.sim.truth.velocity[:2]))
+        time.sleep(0.02)
+    assert speeds and max(speeds) < 0.7
+    # the last item is MAVSDK's gimbal release: the vehicle holds at the last waypoint, as PX4 does
+    wait_for(lambda: _near(server.sim.truth.position, (4.0, 0.0, -1.5), 0.1), 20, "holding at the last waypoint")
 
 
 def test_mavsdk_geofence_upload_download_and_clear(px4_system):

@@ -174,7 +174,8 @@ def test_mission_mode_flies_past_the_landing_marker_and_do_land_start_jumps_to_i
     c = commander_with(0, NO_LANDING)
     reply = c.start_mission_landing(air(1.0))
     assert not reply.accepted and reply.result == mavlink.MAV_RESULT_DENIED
-    assert "the mission has no landing (upload one with DO_LAND_START or NAV_LAND)" in reply.text
+    assert reply.text == ("Landing sequence denied: the mission has no landing (upload one with DO_LAND_START or "
+                          "NAV_LAND)")
 
 
 def test_do_land_start_is_uploaded_placed_or_as_a_bare_marker_and_other_frames_are_refused():
@@ -205,3 +206,80 @@ def test_a_return_of_type_1_lands_on_the_mission_landing_over_mavlink(make_vehic
     assert client.wait_reading(lambda: not server.sim.armed, 30), "did not land and disarm"
     x, y, z = server.sim.truth.position
     assert math.hypot(x - 2.5, y - 2.0) < 0.15 and z > -0.05 and not server.sim.crashed
+
+
+# ---------------------------------------------------------------- choices decided by east, by ties, by where home is
+ELSEWHERE = (4.0, -3.0, -1.0)                                           # home away from the origin, 1 m up
+
+
+def test_home_is_where_home_is_and_the_mission_back_ends_there():
+    plan = plan_return(2, (0.0, 0.0, -3.0), ELSEWHERE, (), NO_LANDING, mission_seq=0)   # nothing behind: home
+    assert (plan.destination, plan.flying, plan.landing, plan.climb) == ((4.0, -3.0), "flying home",
+                                                                         "landing at home", True)
+    plan = plan_return(2, (11.0, 0.0, -3.0), ELSEWHERE, (), NO_LANDING, mission_seq=1)  # item 0 is behind it
+    assert plan.flying == "flying the mission back from item 0, then home" and plan.path == ()
+    plan = plan_return(2, (18.0, 0.0, -6.0), ELSEWHERE, (), NO_LANDING, mission_seq=2)
+    assert plan.destination == (4.0, -3.0) and flat(plan.path) == approx_path(((10.0, 0.0, -6.0),))
+    plan = plan_return(2, (19.0, 0.0, -3.0), ELSEWHERE, (), NO_LANDING)                  # from another mode
+    assert plan.climb is True and plan.destination == (4.0, -3.0)
+    assert plan_return(0, (19.0, 0.0, -3.0), ELSEWHERE, (), MISSION).destination == (4.0, -3.0)
+
+
+def test_a_return_beside_the_land_item_goes_straight_down_on_it():
+    plan = plan_return(2, (31.0, 10.5, -3.0), HOME_NED, (), MISSION)        # the Land item is the nearest
+    assert (plan.flying, plan.path, plan.destination) == ("following the mission from item 5 to its landing", (),
+                                                          (30.0, 10.0))
+
+
+def test_a_land_item_without_a_place_lands_where_the_path_ends_or_where_the_vehicle_is():
+    unplaced_land = MISSION[:5] + (local_item(5, NAV_LAND),)
+    plan = plan_return(2, (15.0, 0.0, -6.0), HOME_NED, (), unplaced_land, mission_seq=2)
+    assert flat(plan.path) == approx_path(((20.0, 0.0, -6.0), (30.0, 5.0, -4.0))) and plan.destination == (30.0, 5.0)
+    plan = plan_return(2, (29.0, 5.0, -4.0), HOME_NED, (), unplaced_land, mission_seq=4)
+    assert plan.destination == (30.0, 5.0)
+    plan = plan_return(2, (29.0, 6.0, -4.0), HOME_NED, (), unplaced_land, mission_seq=5)
+    assert plan.path == () and plan.destination == (29.0, 6.0)
+
+
+def test_the_nearest_item_and_rally_point_are_nearest_across_as_well_as_along():
+    across = (local_item(0, NAV_WAYPOINT, 10.0, 0.0, alt=5.0), local_item(1, NAV_WAYPOINT, 12.0, 8.0, alt=5.0),
+              local_item(2, NAV_LAND, 14.0, 8.0))
+    assert plan_return(2, (10.5, 7.0, -3.0), HOME_NED, (), across).flying == \
+        "following the mission from item 1 to its landing"
+    spread = (rally(0, 30.0, 7.0), rally(1, 15.0, 8.0), rally(2, 10.0, 30.0))
+    assert plan_return(1, (10.0, 7.0, -3.0), HOME_NED, spread, ()).flying == "flying to rally point 1"
+    assert plan_return(1, (-10.0, -7.0, -3.0), HOME_NED, (rally(0, -12.0, -9.0), rally(1, 12.0, 9.0)),
+                       ()).flying == "flying to rally point 0"
+
+
+def test_a_tie_between_a_safe_point_and_the_landing_goes_to_the_landing():
+    assert plan_return(3, (15.0, 2.5, -3.0), HOME_NED, (), MISSION).mission_landing     # 15.2 m either way
+    near = plan_return(3, (15.0, 2.4, -3.0), HOME_NED, (), MISSION)
+    assert near.destination == (0.0, 0.0) and not near.mission_landing
+    plan = plan_return(3, (20.0, 0.0, -5.0), HOME_NED, (rally(0, 21.0, 1.0),), MISSION)
+    assert plan.destination == pytest.approx((21.0, 1.0), abs=0.01)
+
+
+def test_a_return_from_another_mode_follows_the_mission_from_the_nearest_item():
+    c = commander_with(2)
+    assert c.set_mode(FlightMode.AUTO_LOITER, air(0.5, 12.0, 1.0, -5.0)).accepted
+    assert c.set_mode(FlightMode.AUTO_RTL, air(1.0, 12.0, 1.0, -5.0)).accepted
+    assert c.messages[-1] == (mavlink.MAV_SEVERITY_INFO,
+                              "Return: following the mission from item 1 to its landing at 8.0 m above home")
+
+
+def test_a_return_on_the_land_item_from_mission_mode_flies_no_path_and_keeps_its_altitude():
+    c = commander_with(2)
+    assert c.set_mode(FlightMode.AUTO_MISSION, air(0.5, 0.0, 0.0, -5.0)).accepted
+    assert c.set_mission_current(5, air(0.6, 29.0, 9.0, -4.5)).accepted
+    assert c.set_mode(FlightMode.AUTO_RTL, air(1.0, 29.0, 9.0, -4.5)).accepted
+    assert c.messages[-1] == (mavlink.MAV_SEVERITY_INFO, "Return: following the mission from item 5 to its landing")
+    assert c.update(air(2.0, 29.0, 9.0, -4.5)).setpoint.position == pytest.approx((30.0, 10.0, -4.5))
+
+
+def test_a_path_point_is_reached_at_exactly_nav_acc_rad():
+    c = commander_with(1)
+    c.params.set("NAV_ACC_RAD", 0.5)
+    assert c.set_mode(FlightMode.AUTO_RTL, air(1.0, 26.0, 0.0, -8.0)).accepted
+    assert c.update(air(2.0, 26.0, 0.0, -8.0)).setpoint.position == pytest.approx((30.0, 5.0, -8.0))
+    assert c.update(air(3.0, 30.0, 5.5, -8.0)).setpoint.position == pytest.approx((30.0, 5.0, -4.0))

@@ -1,0 +1,169 @@
+"""The mission items beyond the flight path that MAVSDK's Mission plugin and QGroundControl add: DO_CHANGE_SPEED
+(the speed of the items after it), NAV_DELAY and NAV_LOITER_TIME (holds), and camera and gimbal items, which the
+vehicle, carrying no payload, flies past and says so."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from sitl_vehicle.commander import Commander
+from sitl_vehicle.mission import (
+    DO_CHANGE_SPEED,
+    NAV_DELAY,
+    NAV_LOITER_TIME,
+    NAV_TAKEOFF,
+    NAV_WAYPOINT,
+    MissionError,
+    MissionItem,
+    mission_item_from_message,
+    passed_items_note,
+)
+from sitl_vehicle.modes import FlightMode
+from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore
+from sitl_vehicle.sim import Setpoint, VehicleConfig, VehicleSim
+from tests.sitl_vehicle.test_mission import HOME, air, item_msg, local_item, status
+
+MISSION_FRAME = mavlink.MAV_FRAME_MISSION
+
+
+def command_item(seq, command, params, alt=math.nan):
+    """A placeless item as MAVSDK sends it: MAV_FRAME_MISSION, no coordinates, altitude NaN."""
+    return mission_item_from_message(item_msg(seq, command, alt=alt, frame=MISSION_FRAME, params=params, here=True),
+                                     HOME.to_local)
+
+
+def speed_item(seq, speed, kind=1.0) -> MissionItem:
+    return command_item(seq, DO_CHANGE_SPEED, (kind, speed, -1.0, 0.0))
+
+
+def test_speed_delay_loiter_and_payload_items_are_read_as_px4_reads_them():
+    assert speed_item(1, 3.0).speed == 3.0 and speed_item(1, 3.0, kind=0.0).speed == 3.0   # ground or air speed
+    assert math.isnan(speed_item(1, -2.0).speed)                                          # back to the default
+    assert speed_item(1, -1.0).speed is None and speed_item(1, 3.0, kind=2.0).speed is None   # no change; climb
+    assert local_item(0, NAV_WAYPOINT, 1.0, 1.0).speed is None
+    delay = command_item(2, NAV_DELAY, (2.5, -1.0, -1.0, -1.0))
+    assert delay.hold_s == 2.5 and math.isnan(delay.north) and math.isnan(delay.yaw)
+    loiter = mission_item_from_message(item_msg(3, NAV_LOITER_TIME, north=4.0, params=(3.0, 0.0, 0.0, 1.0)),
+                                       HOME.to_local)
+    assert loiter.hold_s == 3.0 and loiter.north == pytest.approx(4.0, abs=0.01) and math.isnan(loiter.yaw)
+    photo = command_item(4, mavlink.MAV_CMD_IMAGE_START_CAPTURE, (0.0, 0.0, 1.0, 0.0))
+    assert photo.name == "IMAGE_START_CAPTURE" and math.isnan(photo.north)
+    back = photo.to_message(False, 1, 1)
+    assert (back.command, back.frame, back.x, back.y) == (mavlink.MAV_CMD_IMAGE_START_CAPTURE, MISSION_FRAME, 0, 0)
+
+
+@pytest.mark.parametrize("msg, result, text", [
+    (item_msg(0, DO_CHANGE_SPEED, frame=MISSION_FRAME, params=(1.0, 0.0, -1.0, 0.0), here=True),
+     mavlink.MAV_MISSION_INVALID_PARAM2, "DO_CHANGE_SPEED's speed (param2) is 0.0; send m/s above 0"),
+    (item_msg(0, DO_CHANGE_SPEED, frame=MISSION_FRAME, params=(1.0, math.nan, -1.0, 0.0), here=True),
+     mavlink.MAV_MISSION_INVALID_PARAM2, "DO_CHANGE_SPEED's speed (param2) is nan"),
+    (item_msg(0, NAV_DELAY, frame=MISSION_FRAME, params=(-1.0, 12.0, 30.0, 0.0), here=True),
+     mavlink.MAV_MISSION_INVALID_PARAM1, "a time of day to wait for is not supported"),
+    (item_msg(0, NAV_LOITER_TIME, frame=MISSION_FRAME, params=(3.0, 0.0, 0.0, 0.0), here=True),
+     mavlink.MAV_MISSION_UNSUPPORTED_FRAME, "frame 2 is not supported"),      # a loiter has a place
+    (item_msg(0, NAV_LOITER_TIME, params=(3.0, 0.0, 0.0, 0.0), here=True),
+     mavlink.MAV_MISSION_INVALID_PARAM5_X, "NAV_LOITER_TIME needs a latitude and longitude"),
+    (item_msg(0, NAV_WAYPOINT, north=1.0, alt=math.nan), mavlink.MAV_MISSION_INVALID_PARAM7, "altitude is nan"),
+])
+def test_bad_items_are_refused_with_the_reason(msg, result, text):
+    with pytest.raises(MissionError) as info:
+        mission_item_from_message(msg, HOME.to_local)
+    assert info.value.result == result and text in str(info.value)
+
+
+def test_an_upload_says_which_items_it_flies_past():
+    items = [local_item(0, NAV_WAYPOINT, 1.0, 0.0), speed_item(1, 2.0),
+             command_item(2, mavlink.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, (-30.0, 0.0, math.nan, math.nan)),
+             command_item(3, mavlink.MAV_CMD_IMAGE_START_CAPTURE, (0.0, 0.0, 1.0, 0.0)),
+             command_item(4, mavlink.MAV_CMD_IMAGE_START_CAPTURE, (0.0, 2.0, 0.0, 0.0)), speed_item(5, 1.0, kind=2.0)]
+    assert passed_items_note(items) == (
+        "Mission: 4 items with nothing to act on here (no camera, gimbal or climb speed model), flown past: "
+        "DO_CHANGE_SPEED of a climb or descent speed, DO_GIMBAL_MANAGER_PITCHYAW, IMAGE_START_CAPTURE")
+    assert passed_items_note(items[:2]) is None
+    assert passed_items_note(items[:3]).startswith("Mission: 1 item with nothing")
+
+
+def flying(items) -> Commander:
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    c.set_mission(items, status(0))
+    assert c.arm(status(0)).accepted
+    assert c.set_mode(FlightMode.AUTO_MISSION, air(0.5)).accepted
+    return c
+
+
+def test_a_speed_change_sets_the_speed_of_the_items_after_it_until_changed_back():
+    c = flying([local_item(0, NAV_WAYPOINT, 2.0, 0.0), speed_item(1, 0.8), local_item(2, NAV_WAYPOINT, 4.0, 0.0),
+                speed_item(3, -1.0), local_item(4, NAV_WAYPOINT, 6.0, 0.0), speed_item(5, -2.0),
+                local_item(6, NAV_WAYPOINT, 8.0, 0.0)])
+    assert math.isnan(c.update(air(1.0)).setpoint.cruise_speed)                   # the default to the first item
+    out = c.update(air(2.0, x=2.0))                                               # reached; the speed item acts
+    assert out.setpoint.position == (4.0, 0.0, -2.0) and out.setpoint.cruise_speed == 0.8
+    assert list(c.mission_reached) == [0, 1]
+    assert c.update(air(3.0, x=4.0)).setpoint.cruise_speed == 0.8                 # -1: no change
+    out = c.update(air(4.0, x=6.0))
+    assert out.setpoint.position == (8.0, 0.0, -2.0) and math.isnan(out.setpoint.cruise_speed)   # -2: default
+    c.update(air(5.0, x=8.0))
+    assert c.mission_finished
+    c.set_mission([local_item(0, NAV_WAYPOINT, 2.0, 0.0), speed_item(1, 0.8)], air(6.0, x=8.0))
+    assert c.set_mode(FlightMode.AUTO_MISSION, air(6.5, x=8.0)).accepted
+    c.update(air(7.0, x=2.0))                                                     # the last item is a speed
+    assert c.mission_finished and c.update(air(7.5, x=2.0)).setpoint.position == (2.0, 0.0, -2.0)
+    assert c.update(air(8.0, x=2.0)).setpoint.cruise_speed == 0.8
+    assert c.set_mode(FlightMode.AUTO_MISSION, air(8.5)).accepted                 # entered again: from item 0,
+    assert math.isnan(c.update(air(9.0)).setpoint.cruise_speed)                    # at the default speed
+
+
+def test_a_delay_holds_at_the_item_before_it_for_param1_seconds():
+    c = flying([local_item(0, NAV_WAYPOINT, 2.0, 0.0), command_item(1, NAV_DELAY, (1.5, -1.0, -1.0, -1.0)),
+                local_item(2, NAV_WAYPOINT, 4.0, 0.0)])
+    out = c.update(air(1.0, x=1.95))                                              # within NAV_ACC_RAD: the delay
+    assert out.setpoint.position == (2.0, 0.0, -2.0) and list(c.mission_reached) == [0, 1]
+    assert c.update(air(2.4, x=1.95)).setpoint.position == (2.0, 0.0, -2.0)       # 1.4 s
+    assert c.update(air(2.5, x=1.95)).setpoint.position == (4.0, 0.0, -2.0)       # 1.5 s: on
+    c = flying([command_item(0, NAV_DELAY, (1.0, -1.0, -1.0, -1.0)), local_item(1, NAV_WAYPOINT, 4.0, 0.0)])
+    assert c.update(air(1.0, x=0.3)).setpoint.position == (0.0, 0.0, -2.0)        # first: where Mission began
+
+
+def test_a_loiter_time_flies_to_its_place_and_holds_there():
+    c = flying([local_item(0, NAV_TAKEOFF, alt=2.0), MissionItem(1, NAV_LOITER_TIME, 6, (2.0, 0.0, 0.0, 0.0),
+                                                                 0.0, 0.0, 3.0, 3.0, 1.0, True, math.nan)])
+    out = c.update(air(1.0))
+    assert out.setpoint.position == (3.0, 1.0, -3.0) and math.isnan(out.setpoint.yaw) is False
+    c.update(air(2.0, 3.0, 1.0, -3.0))
+    c.update(air(3.9, 3.0, 1.0, -3.0))
+    assert not c.mission_finished
+    c.update(air(4.0, 3.0, 1.0, -3.0))
+    assert c.mission_finished
+
+
+def test_the_vehicle_cruises_at_a_setpoints_speed_capped_at_mpc_xy_vel_max():
+    from tests.sitl_vehicle.test_sim import _stream
+
+    def top_speed(setpoint: Setpoint, config: VehicleConfig | None = None) -> float:
+        """The median horizontal speed over seconds 4-8 of the move: its cruise."""
+        sim = VehicleSim(config or VehicleConfig(noise=None), initial_position=(0.0, 0.0, -2.0))
+        sim.set_armed(True)
+        flown = _stream(sim, setpoint, 8.0)
+        return float(np.median(np.hypot(flown[len(flown) // 2:, 3], flown[len(flown) // 2:, 4])))
+
+    far = (30.0, 0.0, -2.0)
+    default = top_speed(Setpoint(position=far))
+    assert default == pytest.approx(VehicleConfig().planner.v_max_xy, rel=0.05)        # MPC_XY_CRUISE
+    assert top_speed(Setpoint(position=far, cruise_speed=0.8)) == pytest.approx(0.8, rel=0.05)
+    capped = VehicleConfig(noise=None)
+    capped = replace(capped, control=replace(capped.control, vel_max_xy=1.2))
+    assert top_speed(Setpoint(position=far, cruise_speed=5.0), capped) == pytest.approx(1.2, rel=0.05)
+
+
+def test_payload_items_last_hold_at_the_waypoint_before_them_as_mavsdk_missions_end():
+    c = flying([local_item(0, NAV_WAYPOINT, 2.0, 0.0),
+                command_item(1, mavlink.MAV_CMD_IMAGE_START_CAPTURE, (0.0, 0.0, 1.0, 0.0)),
+                command_item(2, mavlink.MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE, (-3.0, -3.0, -1.0, -1.0))])
+    out = c.update(air(1.0, x=1.95))                                  # within NAV_ACC_RAD, still moving
+    assert c.mission_finished and list(c.mission_reached) == [0, 1, 2]
+    assert out.setpoint.position == (2.0, 0.0, -2.0)                  # on to the waypoint, not stopped short
