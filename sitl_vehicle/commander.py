@@ -128,6 +128,7 @@ class Commander(Failsafes, Navigator, StickModes):
         self._mission_phase = MIS_DONE
         self._mission_target: tuple[float, float, float] = (NAN, NAN, NAN)
         self._mission_speed = NAN  # the horizontal speed a DO_CHANGE_SPEED set (NaN: MPC_XY_CRUISE)
+        self._jumps_done: dict[int, int] = {}  # DO_JUMP item -> the jumps it made in this run of the mission
         self._mission_since = 0.0
         self._mission_complete = False
         self.geofence = Geofence()
@@ -354,6 +355,7 @@ class Commander(Failsafes, Navigator, StickModes):
                 self.mission_seq = 0  # a finished mission starts again from its first item, at the default speed
                 self._mission_complete = False
                 self._mission_speed = NAN
+                self._jumps_done = {}
             self._mission_target = (NAN, NAN, NAN)  # nothing flown to yet in this mode
             self._begin_mission_item(status)
         elif mode.manual:

@@ -16,6 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 # the MAV_CMDs a mission may hold, with PX4's names
 NAV_WAYPOINT = mavlink.MAV_CMD_NAV_WAYPOINT
+NAV_LOITER_UNLIM = mavlink.MAV_CMD_NAV_LOITER_UNLIM  # a multicopter holds at its place until told otherwise
 NAV_LOITER_TIME = mavlink.MAV_CMD_NAV_LOITER_TIME  # a multicopter holds at its place for param1 s
 NAV_DELAY = mavlink.MAV_CMD_NAV_DELAY  # holds where the vehicle is for param1 s (MAVSDK's loiter_time_s)
 NAV_RETURN_TO_LAUNCH = mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH
@@ -23,6 +24,7 @@ NAV_LAND = mavlink.MAV_CMD_NAV_LAND
 NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
 DO_LAND_START = mavlink.MAV_CMD_DO_LAND_START  # marks where the mission's landing begins (flown past in Mission)
 DO_CHANGE_SPEED = mavlink.MAV_CMD_DO_CHANGE_SPEED  # param2: the horizontal speed of the items after it (m/s)
+DO_JUMP = mavlink.MAV_CMD_DO_JUMP  # go on from item param1, param2 times (then on past the jump)
 SPEED_NO_CHANGE, SPEED_DEFAULT = -1.0, -2.0        # DO_CHANGE_SPEED's param2 for "no change" and "back to default"
 SPEED_TYPES_HORIZONTAL = (0.0, 1.0)                # param1: air speed or ground speed (a multicopter's the same)
 # camera and gimbal items (as MAVSDK's Mission plugin and QGroundControl add them): PX4 hands them to a payload;
@@ -41,11 +43,16 @@ PAYLOAD_COMMANDS = {mavlink.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW: "DO_GIMBAL_MANAG
                     mavlink.MAV_CMD_SET_CAMERA_FOCUS: "SET_CAMERA_FOCUS",
                     mavlink.MAV_CMD_DO_TRIGGER_CONTROL: "DO_TRIGGER_CONTROL",
                     mavlink.MAV_CMD_DO_DIGICAM_CONTROL: "DO_DIGICAM_CONTROL"}
-SUPPORTED_COMMANDS = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_LOITER_TIME: "NAV_LOITER_TIME", NAV_DELAY: "NAV_DELAY",
+SUPPORTED_COMMANDS = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_LOITER_UNLIM: "NAV_LOITER_UNLIM",
+                      NAV_LOITER_TIME: "NAV_LOITER_TIME", NAV_DELAY: "NAV_DELAY",
                       NAV_RETURN_TO_LAUNCH: "NAV_RETURN_TO_LAUNCH", NAV_LAND: "NAV_LAND", NAV_TAKEOFF: "NAV_TAKEOFF",
-                      DO_LAND_START: "DO_LAND_START", DO_CHANGE_SPEED: "DO_CHANGE_SPEED", **PAYLOAD_COMMANDS}
-# items with nothing to fly to: Mission mode acts on them (or not) and goes on to the next at once
-DO_COMMANDS = (DO_LAND_START, DO_CHANGE_SPEED, *PAYLOAD_COMMANDS)
+                      DO_JUMP: "DO_JUMP", DO_LAND_START: "DO_LAND_START", DO_CHANGE_SPEED: "DO_CHANGE_SPEED",
+                      **PAYLOAD_COMMANDS}
+# items with nothing to fly to: Mission mode acts on them (or not) and goes on at once
+DO_COMMANDS = (DO_JUMP, DO_LAND_START, DO_CHANGE_SPEED, *PAYLOAD_COMMANDS)
+# items that take the vehicle somewhere (a jump back must pass one, or it would loop without flying)
+FLOWN_COMMANDS = (NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_DELAY, NAV_LAND, NAV_TAKEOFF,
+                  NAV_RETURN_TO_LAUNCH)
 # items with no place of their own: they may come in MAV_FRAME_MISSION, the frame of commands, and without altitude
 PLACELESS_COMMANDS = (NAV_DELAY, *DO_COMMANDS)
 # items that may leave out a place: "here" for a Takeoff or Land, and the placeless ones
@@ -111,7 +118,10 @@ class MissionItem(PlanItem):
 
     @property
     def hold_s(self) -> float:
-        """NAV_WAYPOINT's, NAV_LOITER_TIME's and NAV_DELAY's param1: seconds to hold at the item."""
+        """Seconds to hold at the item: NAV_WAYPOINT's, NAV_LOITER_TIME's and NAV_DELAY's param1, and for ever at a
+        NAV_LOITER_UNLIM."""
+        if self.command == NAV_LOITER_UNLIM:
+            return math.inf
         return (self.params[0] if self.command in (NAV_WAYPOINT, NAV_LOITER_TIME, NAV_DELAY) and self.params[0] > 0
                 else 0.0)
 
@@ -125,6 +135,11 @@ class MissionItem(PlanItem):
         return math.nan if self.params[1] == SPEED_DEFAULT else self.params[1]
 
     @property
+    def jump(self) -> tuple[int, int]:
+        """DO_JUMP: the item to go on from and how many times."""
+        return int(self.params[0]), int(self.params[1])
+
+    @property
     def acceptance_radius(self) -> float:
         """NAV_WAYPOINT param2 (m; 0: the NAV_ACC_RAD default)."""
         return self.params[1] if self.command == NAV_WAYPOINT and self.params[1] > 0 else 0.0
@@ -132,7 +147,7 @@ class MissionItem(PlanItem):
     @property
     def yaw(self) -> float:
         """param4, the heading to fly (rad; NaN: keep the heading), for the items whose param4 is one."""
-        yaw = self.params[3] if self.command in (NAV_WAYPOINT, NAV_TAKEOFF, NAV_LAND) else math.nan
+        yaw = self.params[3] if self.command in (NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_TAKEOFF, NAV_LAND) else math.nan
         return math.radians(yaw) if math.isfinite(yaw) else math.nan
 
     def down(self, home_down: float) -> float:
@@ -166,6 +181,10 @@ def mission_item_from_message(msg, to_local) -> MissionItem:
     params = (float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4))  # NaN: the default
     if not math.isfinite(alt) and msg.command not in PLACELESS_COMMANDS:
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM7, f"{where}: altitude is {alt}; send metres")
+    if msg.command == DO_JUMP and not all(math.isfinite(p) and p >= 0 and p == int(p) for p in params[:2]):
+        raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
+                           f"{where}: DO_JUMP's item (param1) and repeat count (param2) are {params[0]} and "
+                           f"{params[1]}; send whole numbers, 0 or more")
     if msg.command == NAV_DELAY and not (math.isfinite(params[0]) and params[0] >= 0):
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
                            f"{where}: NAV_DELAY's delay (param1) is {params[0]}; send seconds, 0 or more (a time of "
@@ -234,3 +253,21 @@ def passed_items_note(items) -> str | None:
                     for item in passed})
     return (f"Mission: {len(passed)} item{'s' if len(passed) > 1 else ''} with nothing to act on here (no camera, "
             f"gimbal or climb speed model), flown past: {', '.join(names)}")
+
+
+def check_mission(items) -> None:
+    """What no single item shows: every DO_JUMP goes to an item of the mission other than itself, and one that
+    jumps back passes an item that flies (else Mission mode would loop in place).  Raises MissionError."""
+    for seq, item in enumerate(items):
+        if item.command != DO_JUMP:
+            continue
+        target, _ = item.jump
+        if target >= len(items) or target == seq:
+            raise MissionError(mavlink.MAV_MISSION_INVALID_SEQUENCE,
+                               f"mission item {seq}: DO_JUMP to item {target}, which "
+                               + ("is the jump itself" if target == seq else f"the {len(items)}-item mission lacks")
+                               + "; send the index of another item")
+        if target < seq and not any(items[i].command in FLOWN_COMMANDS for i in range(target, seq)):
+            raise MissionError(mavlink.MAV_MISSION_INVALID_SEQUENCE,
+                               f"mission item {seq}: DO_JUMP back to item {target} passes no item that flies "
+                               "(it would loop in place); jump to a waypoint")

@@ -24,7 +24,14 @@ from sitl_vehicle.geofence import (
     geofence_from_items,
     rally_item_from_message,
 )
-from sitl_vehicle.mission import MAX_ITEMS, MissionError, MissionItem, mission_item_from_message, passed_items_note
+from sitl_vehicle.mission import (
+    MAX_ITEMS,
+    MissionError,
+    MissionItem,
+    check_mission,
+    mission_item_from_message,
+    passed_items_note,
+)
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.udp_link import UdpLink
 
@@ -118,6 +125,8 @@ class MissionProtocol:
             upload["items"].append(read(msg, self.home.to_local))
             if len(upload["items"]) == upload["count"]:
                 self._upload = None
+                if mission_type == mavlink.MAV_MISSION_TYPE_MISSION:
+                    check_mission(upload["items"])
                 self._keep(mission_type, upload["items"])
         except MissionError as exc:
             self._upload = None

@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl_vehicle.commander_types import ACCEPTED, Reply, VehicleStatus
 from sitl_vehicle.mission import (
     DO_COMMANDS,
+    DO_JUMP,
     NAV_DELAY,
     NAV_LAND,
     NAV_RETURN_TO_LAUNCH,
@@ -44,6 +45,7 @@ class Navigator:
         self.mission = tuple(items)
         self.mission_seq = 0
         self._mission_speed = math.nan  # MPC_XY_CRUISE until a DO_CHANGE_SPEED
+        self._jumps_done = {}           # DO_JUMP item -> the jumps it made
         self._mission_phase = MIS_DONE
         self._mission_complete = False
         if self.mode is FlightMode.AUTO_MISSION:
@@ -160,6 +162,12 @@ class Navigator:
         if item.command in DO_COMMANDS:         # act, then on to the next (the last: the mission is finished)
             if item.speed is not None:
                 self._mission_speed = item.speed
+            if item.command == DO_JUMP and self._jumps_done.get(self.mission_seq, 0) < item.jump[1]:
+                self._jumps_done[self.mission_seq] = self._jumps_done.get(self.mission_seq, 0) + 1
+                self._mission_item_reached(status)
+                self.mission_seq = item.jump[0]
+                self._begin_mission_item(status)
+                return
             self._next_mission_item(status, reached=True)
             return
         if item.command == NAV_DELAY:           # hold for param1 s

@@ -14,12 +14,15 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl_vehicle.commander import Commander
 from sitl_vehicle.mission import (
     DO_CHANGE_SPEED,
+    DO_JUMP,
     NAV_DELAY,
     NAV_LOITER_TIME,
+    NAV_LOITER_UNLIM,
     NAV_TAKEOFF,
     NAV_WAYPOINT,
     MissionError,
     MissionItem,
+    check_mission,
     mission_item_from_message,
     passed_items_note,
 )
@@ -167,3 +170,63 @@ def test_payload_items_last_hold_at_the_waypoint_before_them_as_mavsdk_missions_
     out = c.update(air(1.0, x=1.95))                                  # within NAV_ACC_RAD, still moving
     assert c.mission_finished and list(c.mission_reached) == [0, 1, 2]
     assert out.setpoint.position == (2.0, 0.0, -2.0)                  # on to the waypoint, not stopped short
+
+
+def jump_item(seq, target, repeat):
+    return command_item(seq, DO_JUMP, (float(target), float(repeat), 0.0, 0.0))
+
+
+def test_a_jump_goes_back_its_repeat_count_then_on_and_again_when_the_mission_restarts():
+    c = flying([local_item(0, NAV_WAYPOINT, 2.0, 0.0), local_item(1, NAV_WAYPOINT, 4.0, 0.0), jump_item(2, 0, 2),
+                local_item(3, NAV_WAYPOINT, 6.0, 0.0)])
+    targets = []
+    for t, x in enumerate((2.0, 4.0, 2.0, 4.0, 2.0, 4.0, 6.0), start=1):
+        targets.append(c.update(air(float(t), x=x)).setpoint.position[0])
+    assert targets == [4.0, 2.0, 4.0, 2.0, 4.0, 6.0, 6.0] and c.mission_finished      # back twice, then on
+    assert c.set_mode(FlightMode.AUTO_MISSION, air(8.0)).accepted                     # a new run: the count anew
+    assert [c.update(air(float(t), x=x)).setpoint.position[0] for t, x in ((9, 2.0), (10, 4.0))] == [4.0, 2.0]
+
+
+def test_a_loiter_unlimited_holds_at_its_place_until_told_otherwise():
+    loiter = MissionItem(1, NAV_LOITER_UNLIM, 6, (0.0, 0.0, 0.0, 90.0), 0.0, 0.0, 3.0, 3.0, 1.0, True, math.nan)
+    assert math.isinf(loiter.hold_s) and loiter.yaw == pytest.approx(math.pi / 2)
+    c = flying([local_item(0, NAV_TAKEOFF, alt=2.0), loiter, local_item(2, NAV_WAYPOINT, 6.0, 0.0)])
+    assert c.update(air(1.0)).setpoint.position == (3.0, 1.0, -3.0)
+    for t in (2.0, 100.0, 10_000.0):
+        assert c.update(air(t, 3.0, 1.0, -3.0)).setpoint.position == (3.0, 1.0, -3.0)
+    assert c.mission_seq == 1 and not c.mission_finished
+    assert c.set_mission_current(2, air(10_001.0, 3.0, 1.0, -3.0)).accepted          # told to go on
+    assert c.update(air(10_002.0, 3.0, 1.0, -3.0)).setpoint.position == (6.0, 0.0, -2.0)
+
+
+@pytest.mark.parametrize("items, text", [
+    ([local_item(0, NAV_WAYPOINT, 1.0, 0.0), jump_item(1, 5, 1)],
+     "mission item 1: DO_JUMP to item 5, which the 2-item mission lacks; send the index of another item"),
+    ([local_item(0, NAV_WAYPOINT, 1.0, 0.0), jump_item(1, 1, 1)],
+     "mission item 1: DO_JUMP to item 1, which is the jump itself; send the index of another item"),
+    ([local_item(0, NAV_WAYPOINT, 1.0, 0.0), speed_item(1, 2.0), jump_item(2, 1, 3)],
+     "mission item 2: DO_JUMP back to item 1 passes no item that flies (it would loop in place); jump to a waypoint"),
+])
+def test_a_jump_nowhere_or_in_place_refuses_the_mission(items, text):
+    with pytest.raises(MissionError) as info:
+        check_mission(items)
+    assert info.value.result == mavlink.MAV_MISSION_INVALID_SEQUENCE and str(info.value) == text
+
+
+def test_jumps_forward_and_back_over_a_waypoint_pass_the_check():
+    check_mission([jump_item(0, 2, 1), local_item(1, NAV_WAYPOINT, 1.0, 0.0), jump_item(2, 1, 0)])
+    with pytest.raises(MissionError, match="send whole numbers, 0 or more"):
+        command_item(0, DO_JUMP, (1.5, 1.0, 0.0, 0.0))
+    with pytest.raises(MissionError, match=r"DO_JUMP's item \(param1\) and repeat count \(param2\) are 1.0 and -1.0"):
+        command_item(0, DO_JUMP, (1.0, -1.0, 0.0, 0.0))
+
+
+def test_a_mission_with_a_jump_nowhere_is_refused_over_mavlink_and_the_old_one_kept(make_vehicle):
+    from tests.sitl_vehicle.test_mission import upload
+
+    server, client = make_vehicle()
+    assert upload(client, [item_msg(0, NAV_WAYPOINT, north=1.0)]) == mavlink.MAV_MISSION_ACCEPTED
+    jump = item_msg(1, DO_JUMP, frame=MISSION_FRAME, params=(7.0, 1.0, 0.0, 0.0), here=True)
+    assert upload(client, [item_msg(0, NAV_WAYPOINT, north=2.0), jump]) == mavlink.MAV_MISSION_INVALID_SEQUENCE
+    assert "DO_JUMP to item 7, which the 2-item mission lacks" in client.statustext("Mission refused", 3)
+    assert len(server.commander.mission) == 1 and server.commander.mission[0].north == pytest.approx(1.0, abs=0.01)
