@@ -185,6 +185,8 @@ def test_a_jump_goes_back_its_repeat_count_then_on_and_again_when_the_mission_re
     assert targets == [4.0, 2.0, 4.0, 2.0, 4.0, 6.0, 6.0] and c.mission_finished      # back twice, then on
     assert c.set_mode(FlightMode.AUTO_MISSION, air(8.0)).accepted                     # a new run: the count anew
     assert [c.update(air(float(t), x=x)).setpoint.position[0] for t, x in ((9, 2.0), (10, 4.0))] == [4.0, 2.0]
+    c = flying([local_item(0, NAV_WAYPOINT, 2.0, 0.0), jump_item(1, 0, 1), local_item(2, NAV_WAYPOINT, 6.0, 0.0)])
+    assert [c.update(air(float(t), x=2.0)).setpoint.position[0] for t in (1, 2)] == [2.0, 6.0]   # back once
 
 
 def test_a_loiter_unlimited_holds_at_its_place_until_told_otherwise():
