@@ -386,7 +386,7 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
     from scenes.groundtruth import passable_openings
     from tools.ray_sweep import RaySetupError, ray_session
     from tools.sweep_executors import FlightFailed, FlightJob, FlightSettings, LocalFlights, RayFlights
-    from tools.sweep_results import ResumeError, SweepInterrupted, run_sweep
+    from tools.sweep_results import ResumeError, SweepInterrupted, record_run, recorded_runs, run_sweep
     from tools.threads import flight_threads
 
     labels = {s: specs[s].name for s in scenes}      # spec paths are reported by their scene's name
@@ -416,8 +416,17 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
             executor = (LocalFlights(settings, args.out, args.jobs) if args.ray is None
                         else RayFlights(settings, args.out, args.cpus_per_flight))
             t0 = time.monotonic()
-            outcome = run_sweep(jobs, executor, make_row, args.out, sweep_settings(args, link_faults), args.resume)
+            try:
+                outcome = run_sweep(jobs, executor, make_row, args.out, sweep_settings(args, link_faults),
+                                    args.resume)
+            except SweepInterrupted as exc:
+                record_run(args.out, time.monotonic() - t0, exc.saved, "interrupted")
+                raise
+            except FlightFailed:
+                record_run(args.out, time.monotonic() - t0, None, "failed")
+                raise
             wall_s = time.monotonic() - t0
+            record_run(args.out, wall_s, outcome.flown, "complete" if not outcome.missing else "stopped")
     except (RaySetupError, ResumeError) as exc:
         return _fail(str(exc))
     except SweepInterrupted as exc:
@@ -427,13 +436,17 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
         print(f"flowgap-eval-flights: error: a flight raised ({exc}); fix it and rerun with --resume to fly the "
               f"rest", file=sys.stderr)
         return 1
+    runs = recorded_runs(args.out)
     # judged again with today's labels: a row reused by --resume keeps how it was flown, not how it was judged
     rows = sorted((judge(r, passable[r["scene"]]) for r in outcome.rows), key=lambda r: (r["scene"], r["start_index"]))
     summary = summarise(rows)
     summary.update(world=args.world, flow=args.flow, detector=args.detector, edges=args.edges,
                    clock="realtime" if args.realtime else "lockstep",
                    speed=args.speed if args.realtime else None, latency_s=args.latency, seed=args.seed,
-                   starts_per_scene=args.starts, total_wall_s=round(wall_s, 1), threads_per_flight=threads,
+                   starts_per_scene=args.starts, threads_per_flight=threads,
+                   # every run of the sweep (a resumed one's earlier runs too), and this one
+                   total_wall_s=round(sum(run["wall_s"] for run in runs), 1), runs=len(runs),
+                   this_run_wall_s=round(wall_s, 1),
                    link_faults=None if link_faults is None else link_faults.settings(),
                    executor=executor.name, reused=outcome.reused, flown=outcome.flown,
                    flights_per_hour=round(3600 * outcome.flown / wall_s, 1) if outcome.flown and wall_s else None,

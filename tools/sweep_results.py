@@ -4,6 +4,7 @@ Each file holds the flight's judged row and the sweep settings it was flown with
 written as soon as the flight ends, atomically (a stopped sweep leaves whole files or none). With ``resume``,
 :func:`run_sweep` reuses every file of a planned flight and flies only the rest; a file flown with other settings
 is an error, never silently mixed in. Without it, the results of an earlier sweep in the same folder are cleared.
+``OUT/sweep_runs.jsonl`` records each run's wall time, so that a resumed sweep reports the time of all its runs.
 A flight that ends after the sweep was interrupted (Ctrl-C) is never saved: its processes may have had the
 signal too.
 """
@@ -24,6 +25,7 @@ from tqdm import tqdm
 log = logging.getLogger("flowgap.sweep")
 
 RESULTS = "results"
+RUNS = "sweep_runs.jsonl"   # one line per run of the sweep (the first and each --resume): its wall time and end
 
 
 class ResumeError(ValueError):
@@ -70,8 +72,30 @@ def write_result(out: Path, key: str, row: dict, settings: dict) -> Path:
     return path
 
 
+def record_run(out: Path, wall_s: float, flown: int | None, ended: str) -> None:
+    """Add one run of the sweep in ``out`` to its record (``ended``: "complete", "interrupted", "failed")."""
+    out.mkdir(parents=True, exist_ok=True)
+    with (out / RUNS).open("a") as f:
+        f.write(json.dumps({"wall_s": round(wall_s, 1), "flown": flown, "ended": ended}) + "\n")
+
+
+def recorded_runs(out: Path) -> list[dict]:
+    """The runs of the sweep in ``out`` recorded so far (a line that cannot be read is left out, with a warning:
+    a run killed outright leaves none, so the record is a lower bound)."""
+    runs = []
+    path = out / RUNS
+    for n, line in enumerate(path.read_text().splitlines() if path.is_file() else [], start=1):
+        try:
+            run = json.loads(line)
+            runs.append({"wall_s": float(run["wall_s"]), "flown": run.get("flown"), "ended": str(run["ended"])})
+        except (ValueError, KeyError, TypeError):
+            log.warning("%s line %d is not a run record; left out of the sweep's wall time", path, n)
+    return runs
+
+
 def clear_results(out: Path) -> int:
-    """Remove an earlier sweep's result files from ``out``; how many."""
+    """Remove an earlier sweep's result files (and the record of its runs) from ``out``; how many results."""
+    (out / RUNS).unlink(missing_ok=True)
     folder = out / RESULTS
     gone = 0
     for path in [*folder.glob("*.json"), *folder.glob("*.json.part")] if folder.is_dir() else []:

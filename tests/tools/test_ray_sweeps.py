@@ -191,6 +191,10 @@ def test_a_stopped_sweep_resumed_flies_only_the_missing_flights(sweeps):
         path = folder / "results" / name
         assert path.stat().st_mtime_ns == mtime_ns and path.read_text() == text
     assert len(list((folder / "results").glob("*.json"))) == 4
+    runs = [json.loads(line) for line in (folder / "sweep_runs.jsonl").read_text().splitlines()]
+    assert [(r["flown"], r["ended"]) for r in runs] == [(len(saved), "interrupted"), (4 - len(saved), "complete")]
+    assert summary["runs"] == 2 and summary["this_run_wall_s"] == runs[1]["wall_s"]       # both runs' time
+    assert summary["total_wall_s"] == pytest.approx(runs[0]["wall_s"] + runs[1]["wall_s"], abs=0.11)
 
 
 @pytest.mark.slow

@@ -9,7 +9,14 @@ from pathlib import Path
 
 import pytest
 
-from tools.sweep_results import ResumeError, SweepInterrupted, load_results, run_sweep
+from tools.sweep_results import (
+    ResumeError,
+    SweepInterrupted,
+    load_results,
+    record_run,
+    recorded_runs,
+    run_sweep,
+)
 
 SETTINGS = {"world": "standard", "seed": 0, "flow": "dis:fine", "link_faults": None}
 
@@ -55,6 +62,18 @@ def test_a_stopped_sweep_resumed_flies_only_what_is_missing(tmp_path):
     again = FakeFlights()
     assert run_sweep(JOBS, again, make_row, tmp_path, SETTINGS, resume=True, progress=False).reused == 5
     assert again.flown == []
+
+
+def test_each_run_of_a_sweep_is_recorded_and_a_new_sweep_starts_the_record_again(tmp_path, caplog):
+    record_run(tmp_path, 12.34, 2, "interrupted")
+    record_run(tmp_path, 30.0, 3, "complete")
+    assert recorded_runs(tmp_path) == [{"wall_s": 12.3, "flown": 2, "ended": "interrupted"},
+                                       {"wall_s": 30.0, "flown": 3, "ended": "complete"}]
+    with (tmp_path / "sweep_runs.jsonl").open("a") as f:
+        f.write("{not json\n")
+    assert len(recorded_runs(tmp_path)) == 2 and "line 3 is not a run record" in caplog.text
+    run_sweep(JOBS, FakeFlights(), make_row, tmp_path, SETTINGS, progress=False)     # not resumed: a new sweep
+    assert recorded_runs(tmp_path) == [] and recorded_runs(tmp_path / "nowhere") == []
 
 
 def test_without_resume_an_earlier_sweeps_results_are_cleared_and_flown_again(tmp_path):
