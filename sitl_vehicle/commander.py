@@ -136,6 +136,7 @@ class Commander(Failsafes, Navigator, StickModes):
         self.rally_points: tuple[RallyItem, ...] = ()
         self._rtl_plan: ReturnPlan | None = None  # where and how Return flies (set as it begins)
         self._rtl_path_index = 0  # the point of its path being flown to
+        self._reposition: tuple[tuple[float, float, float], float] | None = None  # its target and speed
 
     # ----------------------------------------------------------------------------------- requests
     def arm(self, status: VehicleStatus, force: bool = False) -> Reply:
@@ -234,6 +235,26 @@ class Commander(Failsafes, Navigator, StickModes):
         self._enter(FlightMode.AUTO_RTL, status)
         return ACCEPTED
 
+    def reposition(self, status: VehicleStatus, target: tuple[float, float, float], yaw: float = NAN,
+                   speed: float = NAN) -> Reply:
+        """MAV_CMD_DO_REPOSITION (MAVSDK's goto_location), as PX4 flies it: Hold mode, flying to ``target`` (local
+        NED; a NaN component keeps the vehicle's own) at ``speed`` (m/s; NaN or not above 0: MPC_XY_CRUISE), facing
+        ``yaw`` (rad; NaN: the heading it has), then holding there."""
+        if not self.armed or status.landed:
+            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Reposition denied: not flying (take "
+                                                                         "off first)")
+        self.failsafe = False
+        self._delayed_failsafe = None       # a place the pilot chose ends a failsafe's delay, as a mode does
+        self._enter(FlightMode.AUTO_LOITER, status)
+        goal = tuple(t if math.isfinite(t) else here for t, here in zip(target, status.position, strict=True))
+        self._hold_target = goal
+        if math.isfinite(yaw):
+            self._hold_yaw = yaw
+        self._reposition = (goal, speed if speed > 0 else NAN)   # (NaN > 0 is False)
+        self._say(mavlink.MAV_SEVERITY_INFO, f"Reposition: flying to {goal[0]:.1f} m north, {goal[1]:.1f} m east, "
+                                             f"{self.home[2] - goal[2]:.1f} m above home")
+        return ACCEPTED
+
     def gcs_heartbeat(self, time_s: float) -> None:
         """A ground station's HEARTBEAT arrived (the data link whose loss NAV_DLL_ACT acts on)."""
         self._gcs_time = time_s
@@ -323,7 +344,9 @@ class Commander(Failsafes, Navigator, StickModes):
             return Setpoint(position=(x, y, NAN), velocity=(NAN, NAN, self.params["MPC_LAND_SPEED"]),
                             yaw=self._hold_yaw)
         target = self._hold_target or status.position
-        return Setpoint(position=target, yaw=self._hold_yaw)
+        # a reposition's speed holds for its own target only: Hold entered any other way flies at MPC_XY_CRUISE
+        speed = self._reposition[1] if self._reposition is not None and self._reposition[0] == target else NAN
+        return Setpoint(position=target, yaw=self._hold_yaw, cruise_speed=speed)
 
     def _takeoff_reached(self, status: VehicleStatus) -> bool:
         """At the takeoff altitude within NAV_ACC_RAD, and at its horizontal target if it has one (a vertical

@@ -197,10 +197,11 @@ class MavlinkVehicleInterface(MissionProtocol):
         if not self._for_me(msg) or msg.target_component not in (0, COMPONENT_ID):
             return
         params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.x * 1e-7, msg.y * 1e-7, msg.z)
-        self._ack(link, msg, msg.command, self.execute(msg.command, params, link))
+        self._ack(link, msg, msg.command, self.execute(msg.command, params, link, msg.frame))
 
-    def execute(self, command: int, p: tuple, link: UdpLink) -> Reply:
-        """Run one MAV_CMD; NaN parameters mean 'use the default', as PX4 treats them."""
+    def execute(self, command: int, p: tuple, link: UdpLink, frame: int = mavlink.MAV_FRAME_GLOBAL) -> Reply:
+        """Run one MAV_CMD; NaN parameters mean 'use the default', as PX4 treats them. ``frame``: COMMAND_INT's,
+        for a place's altitude (COMMAND_LONG's are above mean sea level)."""
         status = self.status_fn()
         c = self.commander
         if command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
@@ -231,6 +232,8 @@ class MavlinkVehicleInterface(MissionProtocol):
             return c.set_mode(mode, status)
         if command == mavlink.MAV_CMD_MISSION_START:
             return c.start_mission(status, int(_nan_to(p[0], 0)))
+        if command == mavlink.MAV_CMD_DO_REPOSITION:
+            return self._reposition_command(p, frame, status)
         if command == mavlink.MAV_CMD_DO_LAND_START:
             return c.start_mission_landing(status)
         if command == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
@@ -247,6 +250,27 @@ class MavlinkVehicleInterface(MissionProtocol):
         if command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return self._send_requested(link, mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
         return Reply(mavlink.MAV_RESULT_UNSUPPORTED)
+
+    def _reposition_command(self, p: tuple, frame: int, status: VehicleStatus) -> Reply:
+        """DO_REPOSITION: param1 the ground speed (-1: default), param4 the yaw (rad), param5-7 the place (NaN, or
+        a latitude or longitude out of range such as COMMAND_INT's INT32_MAX: keep the vehicle's own)."""
+        if frame not in (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                         mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
+            return Reply(mavlink.MAV_RESULT_DENIED, f"Reposition denied: frame {frame} is not supported; send "
+                                                    "MAV_FRAME_GLOBAL_INT (5) or MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
+        lat, lon, alt = p[4], p[5], p[6]
+        placed = math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180
+        relative = frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+        home_amsl = self.home.to_global(self.commander.home)[2]
+        amsl = alt + home_amsl if relative else alt
+        north, east, down = self.home.to_local(lat if placed else self.home.lat_deg,
+                                               lon if placed else self.home.lon_deg, amsl)
+        if placed and math.hypot(north, east) > MAX_REPOSITION_M:
+            return Reply(mavlink.MAV_RESULT_DENIED, f"Reposition denied: {lat:.7f}, {lon:.7f} is "
+                                                    f"{math.hypot(north, east) / 1000:.0f} km from home; send a place "
+                                                    "near home")
+        target = (north if placed else math.nan, east if placed else math.nan, down if math.isfinite(alt) else math.nan)
+        return self.commander.reposition(status, target, p[3], p[0])
 
     def _set_interval(self, link: UdpLink, msg_id: int, interval_us: float) -> Reply:
         name = _msg_name(msg_id)
@@ -372,6 +396,9 @@ def statustext_messages(severity: int, text: str, text_id: int) -> list:
 def _msg_name(msg_id: int) -> str | None:
     cls = mavlink.mavlink_map.get(msg_id)
     return cls.msgname if cls is not None else None
+
+
+MAX_REPOSITION_M = 10_000.0  # a reposition farther than this from home is a mistake (coordinates sent wrong)
 
 
 # MAV_PARAM_TYPE of an integer -> (its size in bytes, signed), for PX4's bytewise encoding in the float field

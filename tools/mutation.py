@@ -69,7 +69,7 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
                                [f"tests/sitl_vehicle/test_{t}.py" for t in ("commander", "takeoff", "mission",
                                                                             "manual", "acro", "geofence",
                                                                             "rally", "return_types",
-                                                                            "mission_items")]),
+                                                                            "mission_items", "reposition")]),
 }
 
 STAGING_PYPROJECT = """\

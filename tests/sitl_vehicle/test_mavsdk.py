@@ -205,6 +205,23 @@ def test_mavsdk_mission_with_speed_loiter_camera_and_gimbal_items(px4_system):
     wait_for(lambda: _near(server.sim.truth.position, (4.0, 0.0, -1.5), 0.1), 20, "holding at the last waypoint")
 
 
+def test_mavsdk_goto_location_flies_there_and_holds_facing_the_yaw(px4_system):
+    """MAVSDK's Action.goto_location (MAV_CMD_DO_REPOSITION, an AMSL altitude and a yaw in degrees)."""
+    server, system = px4_system
+    telemetry, action = Telemetry(system), Action(system)
+    wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+    action.set_takeoff_altitude(1.5)
+    action.arm()
+    action.takeoff()
+    wait_for(lambda: abs(telemetry.position_velocity_ned().position.down_m + 1.5) < 0.1, 20, "takeoff altitude")
+    home = server.config.home
+    lat, lon, amsl = home.to_global((2.0, -1.0, -2.5))
+    action.goto_location(lat, lon, amsl, 90.0)
+    wait_for(lambda: telemetry.flight_mode() == FlightMode.HOLD, 5, "Hold mode")
+    wait_for(lambda: _near(server.sim.truth.position, (2.0, -1.0, -2.5), 0.1), 30, "the place")
+    wait_for(lambda: abs(telemetry.heading().heading_deg - 90.0) < 3.0, 10, "facing east")
+
+
 def test_mavsdk_geofence_upload_download_and_clear(px4_system):
     """MAVSDK's Geofence plugin: an inclusion polygon and an exclusion circle go up as a plan of type FENCE, come
     back as they were sent, and are cleared."""
