@@ -255,6 +255,25 @@ class Commander(Failsafes, Navigator, StickModes):
                                              f"{self.home[2] - goal[2]:.1f} m above home")
         return ACCEPTED
 
+    def change_speed(self, speed: float) -> Reply:
+        """MAV_CMD_DO_CHANGE_SPEED as a command (MAVSDK's set_current_speed): the horizontal speed (m/s; NaN: back to
+        MPC_XY_CRUISE) of the mission from here, and of a reposition under way."""
+        self._mission_speed = speed
+        if self._reposition is not None:
+            self._reposition = (self._reposition[0], speed)
+        return ACCEPTED
+
+    def terminate(self) -> Reply:
+        """MAV_CMD_DO_FLIGHTTERMINATION (MAVSDK's terminate): the motors stop at once, in the air too, as PX4's
+        flight termination does; the vehicle falls."""
+        self._disarm("Flight terminated: motors stopped")
+        return ACCEPTED
+
+    def set_home(self, place: tuple[float, float, float]) -> Reply:
+        """MAV_CMD_DO_SET_HOME: home (local NED) moves to ``place``; Return and relative altitudes follow it."""
+        self.home = place
+        return ACCEPTED
+
     def gcs_heartbeat(self, time_s: float) -> None:
         """A ground station's HEARTBEAT arrived (the data link whose loss NAV_DLL_ACT acts on)."""
         self._gcs_time = time_s

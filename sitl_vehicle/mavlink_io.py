@@ -21,6 +21,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl_vehicle.commander import Commander, Reply, VehicleStatus
 from sitl_vehicle.link_signing import LinkSigning
 from sitl_vehicle.manual import ManualControlError, sticks_from_manual_control
+from sitl_vehicle.mission import SPEED_DEFAULT, SPEED_NO_CHANGE, SPEED_TYPES_HORIZONTAL
 from sitl_vehicle.mission_protocol import MissionProtocol
 from sitl_vehicle.modes import UnsupportedMode, mode_from_custom
 from sitl_vehicle.params import ParameterError, ParameterStore
@@ -234,6 +235,15 @@ class MavlinkVehicleInterface(MissionProtocol):
             return c.start_mission(status, int(_nan_to(p[0], 0)))
         if command == mavlink.MAV_CMD_DO_REPOSITION:
             return self._reposition_command(p, frame, status)
+        if command == mavlink.MAV_CMD_DO_FLIGHTTERMINATION:
+            if not p[0] > 0.5:   # (NaN too)
+                return Reply(mavlink.MAV_RESULT_DENIED, "Flight termination not activated: send param1 1 to stop the "
+                                                        "motors")
+            return c.terminate()
+        if command == mavlink.MAV_CMD_DO_CHANGE_SPEED:
+            return self._change_speed_command(p)
+        if command == mavlink.MAV_CMD_DO_SET_HOME:
+            return self._set_home_command(p, status)
         if command == mavlink.MAV_CMD_DO_LAND_START:
             return c.start_mission_landing(status)
         if command == mavlink.MAV_CMD_DO_SET_MISSION_CURRENT:
@@ -250,6 +260,36 @@ class MavlinkVehicleInterface(MissionProtocol):
         if command == mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return self._send_requested(link, mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
         return Reply(mavlink.MAV_RESULT_UNSUPPORTED)
+
+    def _change_speed_command(self, p: tuple) -> Reply:
+        """DO_CHANGE_SPEED: param1 the speed's type (0 air, 1 ground: a multicopter's the same), param2 the speed
+        (m/s; -1 no change, -2 the default), as in a mission item."""
+        kind, speed = p[0], p[1]
+        if kind not in SPEED_TYPES_HORIZONTAL:
+            return Reply(mavlink.MAV_RESULT_DENIED, f"Speed change denied: speed type {kind} (a climb or descent "
+                                                    "speed) is not modelled; send 1, a ground speed")
+        if speed == SPEED_NO_CHANGE:
+            return Reply(mavlink.MAV_RESULT_ACCEPTED)
+        if not (speed > 0 or speed == SPEED_DEFAULT):
+            return Reply(mavlink.MAV_RESULT_DENIED, f"Speed change denied: speed {speed}; send m/s above 0, -1 (no "
+                                                    "change) or -2 (the default)")
+        return self.commander.change_speed(speed if speed > 0 else math.nan)
+
+    def _set_home_command(self, p: tuple, status: VehicleStatus) -> Reply:
+        """DO_SET_HOME: param1 1 for where the vehicle is, else param5-7 the place (AMSL, as PX4 reads it)."""
+        if p[0] > 0.5:
+            return self.commander.set_home(status.position)
+        lat, lon, alt = p[4], p[5], p[6]
+        if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(alt) and abs(lat) <= 90
+                and abs(lon) <= 180):
+            return Reply(mavlink.MAV_RESULT_DENIED, "Set home denied: send param1 1 (here) or a latitude, longitude "
+                                                    "and altitude")
+        north, east, down = self.home.to_local(lat, lon, alt)
+        if math.hypot(north, east) > MAX_REPOSITION_M:
+            return Reply(mavlink.MAV_RESULT_DENIED, f"Set home denied: {lat:.7f}, {lon:.7f} is "
+                                                    f"{math.hypot(north, east) / 1000:.0f} km from here; send a place "
+                                                    "near the vehicle")
+        return self.commander.set_home((north, east, down))
 
     def _reposition_command(self, p: tuple, frame: int, status: VehicleStatus) -> Reply:
         """DO_REPOSITION: param1 the ground speed (-1: default), param4 the yaw (rad), param5-7 the place (NaN, or
@@ -398,7 +438,7 @@ def _msg_name(msg_id: int) -> str | None:
     return cls.msgname if cls is not None else None
 
 
-MAX_REPOSITION_M = 10_000.0  # a reposition farther than this from home is a mistake (coordinates sent wrong)
+MAX_REPOSITION_M = 10_000.0  # a reposition or home farther than this from home is a mistake (coordinates sent wrong)
 
 
 # MAV_PARAM_TYPE of an integer -> (its size in bytes, signed), for PX4's bytewise encoding in the float field

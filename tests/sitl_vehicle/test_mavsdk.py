@@ -222,6 +222,33 @@ def test_mavsdk_goto_location_flies_there_and_holds_facing_the_yaw(px4_system):
     wait_for(lambda: abs(telemetry.heading().heading_deg - 90.0) < 3.0, 10, "facing east")
 
 
+def test_mavsdk_set_current_speed_set_home_and_terminate(px4_system):
+    server, system = px4_system
+    telemetry, action = Telemetry(system), Action(system)
+    wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+    action.set_takeoff_altitude(1.5)
+    action.arm()
+    action.takeoff()
+    wait_for(lambda: abs(telemetry.position_velocity_ned().position.down_m + 1.5) < 0.1, 20, "takeoff altitude")
+    home = server.config.home
+    lat, lon, amsl = home.to_global((12.0, 0.0, -1.5))
+    action.goto_location(lat, lon, amsl, 0.0)
+    action.set_current_speed(0.7)
+    speeds = []
+    while server.sim.truth.position[0] < 3.0:
+        assert len(speeds) < 1000, "did not move on"
+        if server.sim.truth.position[0] > 1.5:
+            speeds.append(math.hypot(*server.sim.truth.velocity[:2]))
+        time.sleep(0.02)
+    assert speeds and max(speeds) < 0.75
+    lat, lon, amsl = home.to_global((3.0, 4.0, -1.0))
+    action.set_home(False, lat, lon, amsl)
+    wait_for(lambda: abs(telemetry.home().latitude_deg - lat) < 1e-6, 5, "the new home")
+    assert _near(server.commander.home, (3.0, 4.0, -1.0), 0.01)
+    action.terminate()
+    wait_for(lambda: not telemetry.armed(), 5, "the motors stopped")
+
+
 def test_mavsdk_geofence_upload_download_and_clear(px4_system):
     """MAVSDK's Geofence plugin: an inclusion polygon and an exclusion circle go up as a plan of type FENCE, come
     back as they were sent, and are cleared."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander
@@ -89,3 +90,52 @@ def test_a_reposition_over_mavlink_flies_there_and_holds(make_vehicle):
     assert ack.result == mavlink.MAV_RESULT_DENIED and "20 km from home" in client.statustext("Reposition denied", 3)
     ack = reposition_int(client, 1.0, 0.0, 2.0, mavlink.MAV_FRAME_LOCAL_NED)
     assert ack.result == mavlink.MAV_RESULT_DENIED and "frame 1 is not supported" in client.statustext("frame 1", 3)
+
+
+def test_a_speed_change_applies_to_the_mission_and_to_a_reposition_under_way():
+    c = flying()
+    assert c.reposition(air(1.0), (6.0, 0.0, -2.0), speed=1.0).accepted
+    assert c.change_speed(2.5).accepted and c.update(air(1.1)).setpoint.cruise_speed == 2.5
+    assert c.change_speed(NAN).accepted and math.isnan(c.update(air(1.2)).setpoint.cruise_speed)
+    assert math.isnan(c._mission_speed)                              # the mission's default too
+
+
+def test_flight_termination_stops_the_motors_in_the_air():
+    c = flying()
+    assert c.terminate().accepted and not c.armed
+    assert c.messages[-1] == (mavlink.MAV_SEVERITY_INFO, "Flight terminated: motors stopped")
+
+
+def test_home_moves_and_return_goes_to_it():
+    c = flying()
+    assert c.set_home((10.0, -4.0, -1.0)).accepted and c.home == (10.0, -4.0, -1.0)
+    assert c.set_mode(FlightMode.AUTO_RTL, air(1.0, 2.0, 0.0, -3.0)).accepted
+    assert c.messages[-1][1] == "Return: flying home at 60.0 m above home"
+    c.update(air(2.0, 2.0, 0.0, -61.0))
+    assert c.update(air(3.0, 2.0, 0.0, -61.0)).setpoint.position == (10.0, -4.0, -61.0)
+
+
+@pytest.mark.parametrize("command, params, text", [
+    (mavlink.MAV_CMD_DO_FLIGHTTERMINATION, (0.0,), "Flight termination not activated: send param1 1"),
+    (mavlink.MAV_CMD_DO_CHANGE_SPEED, (2.0, 1.0), "speed type 2.0 (a climb or descent speed) is not modelled"),
+    (mavlink.MAV_CMD_DO_CHANGE_SPEED, (1.0, 0.0), "Speed change denied: speed 0.0; send m/s above 0"),
+    (mavlink.MAV_CMD_DO_SET_HOME, (0.0, 0.0, 0.0, 0.0, NAN, NAN, NAN), "send param1 1 (here) or a latitude"),
+    (mavlink.MAV_CMD_DO_SET_HOME, (0.0, 0.0, 0.0, 0.0, 48.0, 8.5456, 500.0), "km from here; send a place near"),
+])
+def test_bad_speed_termination_and_home_commands_are_refused_with_the_reason(make_vehicle, command, params, text):
+    server, client = make_vehicle()
+    assert client.command(command, *params).result == mavlink.MAV_RESULT_DENIED
+    assert text in client.statustext(text[:12], 3)
+    assert server.commander.armed is False and server.commander.home == (0.0, 0.0, 0.0)
+
+
+def test_set_home_here_and_a_ground_speed_over_mavlink(make_vehicle):
+    server, client = make_vehicle()
+    assert client.command(mavlink.MAV_CMD_DO_SET_HOME, 1.0).result == mavlink.MAV_RESULT_ACCEPTED
+    assert math.dist(server.commander.home, server.sim.estimate.position) < 0.05        # where it is now
+    assert client.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 1.0, 3.0).result == mavlink.MAV_RESULT_ACCEPTED
+    assert server.commander._mission_speed == 3.0
+    assert client.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 0.0, -1.0).result == mavlink.MAV_RESULT_ACCEPTED
+    assert server.commander._mission_speed == 3.0                                        # -1: no change
+    assert client.command(mavlink.MAV_CMD_DO_CHANGE_SPEED, 0.0, -2.0).result == mavlink.MAV_RESULT_ACCEPTED
+    assert math.isnan(server.commander._mission_speed)                                   # -2: the default
