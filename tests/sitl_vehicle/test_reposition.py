@@ -34,6 +34,9 @@ def test_a_reposition_holds_at_the_place_at_its_speed_and_heading():
     assert (sp.position, sp.yaw, sp.cruise_speed) == ((5.0, -3.0, -4.0), 0.5, 1.5)
     assert c.set_mode(FlightMode.AUTO_LOITER, air(2.0, 3.0, 0.0, -3.0)).accepted       # Hold again: its own stop,
     assert math.isnan(c.update(air(2.1, 3.0, 0.0, -3.0)).setpoint.cruise_speed)         # at the default speed
+    for speed, flown in ((0.5, 0.5), (0.0, NAN), (-1.0, NAN)):                          # not above 0: the default
+        assert c.reposition(air(3.0), (5.0, -3.0, -4.0), speed=speed).accepted
+        assert c.update(air(3.1)).setpoint.cruise_speed == pytest.approx(flown, nan_ok=True)
 
 
 def test_a_reposition_keeps_what_it_leaves_out_and_the_default_speed_for_none():
