@@ -2,10 +2,12 @@
 requests that load and start a mission.
 
 :class:`Navigator` is a mixin of :class:`sitl_vehicle.commander.Commander` (it reads and sets the commander's
-state and calls its ``_enter``, ``_say`` and ``_mission_item_reached``): Return's legs (climb, fly home, descend,
-wait, land) and a mission's items (climb, fly, hold, land) with the targets the commander's setpoint flies.
-Apart from the commander because the commander chooses the mode and this flies it: it never changes mode but
-to hand a mission's Return item to Return mode.
+state and calls its ``_enter``, ``set_mode``, ``_say`` and ``_mission_item_reached``): Return's legs (climb, the
+plan's path, fly to the destination, descend, wait, land; :mod:`sitl_vehicle.return_plan` says where) and a
+mission's items (climb, fly, hold, land, and the items with nothing to fly to) with the targets the commander's
+setpoint flies. Apart from the commander because the commander chooses the mode and this flies it: it changes mode
+only to hand a mission's Return item to Return mode, to hold when a mission is replaced in flight, and to start
+Mission mode when asked to (MISSION_START, DO_LAND_START).
 """
 
 from __future__ import annotations
