@@ -21,7 +21,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from sitl_vehicle.commander import Commander, Reply, VehicleStatus
 from sitl_vehicle.link_signing import LinkSigning
 from sitl_vehicle.manual import ManualControlError, sticks_from_manual_control
-from sitl_vehicle.mission import SPEED_DEFAULT, SPEED_NO_CHANGE, SPEED_TYPES_HORIZONTAL
+from sitl_vehicle.mission import MAX_DISTANCE_M, SPEED_TYPES_HORIZONTAL, speed_change, valid_speed
 from sitl_vehicle.mission_protocol import MissionProtocol
 from sitl_vehicle.modes import UnsupportedMode, mode_from_custom
 from sitl_vehicle.params import ParameterError, ParameterStore
@@ -268,28 +268,22 @@ class MavlinkVehicleInterface(MissionProtocol):
         if kind not in SPEED_TYPES_HORIZONTAL:
             return Reply(mavlink.MAV_RESULT_DENIED, f"Speed change denied: speed type {kind} (a climb or descent "
                                                     "speed) is not modelled; send 1, a ground speed")
-        if speed == SPEED_NO_CHANGE:
-            return Reply(mavlink.MAV_RESULT_ACCEPTED)
-        if not (speed > 0 or speed == SPEED_DEFAULT):
+        if not valid_speed(speed):
             return Reply(mavlink.MAV_RESULT_DENIED, f"Speed change denied: speed {speed}; send m/s above 0, -1 (no "
                                                     "change) or -2 (the default)")
-        return self.commander.change_speed(speed if speed > 0 else math.nan)
+        new = speed_change(kind, speed)
+        return Reply(mavlink.MAV_RESULT_ACCEPTED) if new is None else self.commander.change_speed(new)
 
     def _set_home_command(self, p: tuple, status: VehicleStatus) -> Reply:
         """DO_SET_HOME: param1 1 for where the vehicle is, else param5-7 the place (AMSL, as PX4 reads it)."""
         if p[0] > 0.5:
             return self.commander.set_home(status.position)
         lat, lon, alt = p[4], p[5], p[6]
-        if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(alt) and abs(lat) <= 90
-                and abs(lon) <= 180):
+        if not (_is_lat_lon(lat, lon) and math.isfinite(alt)):
             return Reply(mavlink.MAV_RESULT_DENIED, "Set home denied: send param1 1 (here) or a latitude, longitude "
                                                     "and altitude")
         north, east, down = self.home.to_local(lat, lon, alt)
-        if math.hypot(north, east) > MAX_REPOSITION_M:
-            return Reply(mavlink.MAV_RESULT_DENIED, f"Set home denied: {lat:.7f}, {lon:.7f} is "
-                                                    f"{math.hypot(north, east) / 1000:.0f} km from here; send a place "
-                                                    "near the vehicle")
-        return self.commander.set_home((north, east, down))
+        return _far_from_home("Set home", lat, lon, north, east) or self.commander.set_home((north, east, down))
 
     def _reposition_command(self, p: tuple, frame: int, status: VehicleStatus) -> Reply:
         """DO_REPOSITION: param1 the ground speed (-1: default), param4 the yaw (rad), param5-7 the place (NaN, or
@@ -299,16 +293,15 @@ class MavlinkVehicleInterface(MissionProtocol):
             return Reply(mavlink.MAV_RESULT_DENIED, f"Reposition denied: frame {frame} is not supported; send "
                                                     "MAV_FRAME_GLOBAL_INT (5) or MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
         lat, lon, alt = p[4], p[5], p[6]
-        placed = math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180
+        placed = _is_lat_lon(lat, lon)
         relative = frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
         home_amsl = self.home.to_global(self.commander.home)[2]
         amsl = alt + home_amsl if relative else alt
         north, east, down = self.home.to_local(lat if placed else self.home.lat_deg,
                                                lon if placed else self.home.lon_deg, amsl)
-        if placed and math.hypot(north, east) > MAX_REPOSITION_M:
-            return Reply(mavlink.MAV_RESULT_DENIED, f"Reposition denied: {lat:.7f}, {lon:.7f} is "
-                                                    f"{math.hypot(north, east) / 1000:.0f} km from home; send a place "
-                                                    "near home")
+        far = _far_from_home("Reposition", lat, lon, north, east) if placed else None
+        if far:
+            return far
         target = (north if placed else math.nan, east if placed else math.nan, down if math.isfinite(alt) else math.nan)
         return self.commander.reposition(status, target, p[3], p[0])
 
@@ -438,7 +431,18 @@ def _msg_name(msg_id: int) -> str | None:
     return cls.msgname if cls is not None else None
 
 
-MAX_REPOSITION_M = 10_000.0  # a reposition or home farther than this from home is a mistake (coordinates sent wrong)
+def _is_lat_lon(lat: float, lon: float) -> bool:
+    """A command's latitude and longitude name a place (not NaN, nor out of range as COMMAND_INT's INT32_MAX is)."""
+    return math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180
+
+
+def _far_from_home(what: str, lat: float, lon: float, north: float, east: float) -> Reply | None:
+    """A command's refusal for a place farther from home than a mission's may be (coordinates sent wrong)."""
+    distance = math.hypot(north, east)
+    if distance <= MAX_DISTANCE_M:
+        return None
+    return Reply(mavlink.MAV_RESULT_DENIED, f"{what} denied: {lat:.7f}, {lon:.7f} is {distance / 1000:.0f} km from "
+                                            "home; send a place near home")
 
 
 # MAV_PARAM_TYPE of an integer -> (its size in bytes, signed), for PX4's bytewise encoding in the float field

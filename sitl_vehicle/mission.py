@@ -129,10 +129,7 @@ class MissionItem(PlanItem):
     def speed(self) -> float | None:
         """DO_CHANGE_SPEED: the horizontal speed (m/s) of the items after it, NaN for the default, None for no
         change (or a climb or descent speed, which the vehicle does not model)."""
-        if self.command != DO_CHANGE_SPEED or self.params[1] == SPEED_NO_CHANGE \
-                or self.params[0] not in SPEED_TYPES_HORIZONTAL:
-            return None
-        return math.nan if self.params[1] == SPEED_DEFAULT else self.params[1]
+        return speed_change(self.params[0], self.params[1]) if self.command == DO_CHANGE_SPEED else None
 
     @property
     def jump(self) -> tuple[int, int]:
@@ -189,7 +186,7 @@ def mission_item_from_message(msg, to_local) -> MissionItem:
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM1,
                            f"{where}: NAV_DELAY's delay (param1) is {params[0]}; send seconds, 0 or more (a time of "
                            "day to wait for is not supported)")
-    if msg.command == DO_CHANGE_SPEED and not (params[1] > 0 or params[1] in (SPEED_NO_CHANGE, SPEED_DEFAULT)):
+    if msg.command == DO_CHANGE_SPEED and not valid_speed(params[1]):
         raise MissionError(mavlink.MAV_MISSION_INVALID_PARAM2,
                            f"{where}: DO_CHANGE_SPEED's speed (param2) is {params[1]}; send m/s above 0, -1 (no "
                            "change) or -2 (the default)")
@@ -228,6 +225,19 @@ def local_near_home(where: str, lat: float, lon: float, alt: float, to_local) ->
                            f"{where}: {lat:.7f}, {lon:.7f} is {distance / 1000:.0f} km from home; send coordinates "
                            "near home")
     return north, east
+
+
+def valid_speed(speed: float) -> bool:
+    """DO_CHANGE_SPEED's param2, as a mission item or a command: m/s above 0, or -1 (no change), or -2 (default)."""
+    return speed > 0 or speed in (SPEED_NO_CHANGE, SPEED_DEFAULT)
+
+
+def speed_change(kind: float, speed: float) -> float | None:
+    """What a valid DO_CHANGE_SPEED of type ``kind`` (param1) and ``speed`` (param2) sets: the horizontal speed
+    (m/s), NaN for the default, None for no change (or a climb or descent speed, which the vehicle does not model)."""
+    if speed == SPEED_NO_CHANGE or kind not in SPEED_TYPES_HORIZONTAL:
+        return None
+    return math.nan if speed == SPEED_DEFAULT else speed
 
 
 def mission_landing(items) -> tuple[int, int] | None:

@@ -205,15 +205,21 @@ def test_mavsdk_mission_with_speed_loiter_camera_and_gimbal_items(px4_system):
     wait_for(lambda: _near(server.sim.truth.position, (4.0, 0.0, -1.5), 0.1), 20, "holding at the last waypoint")
 
 
+def airborne(system, altitude: float = 1.5) -> tuple[Telemetry, Action]:
+    """Health OK, armed and taken off to ``altitude`` above home with MAVSDK's Action plugin."""
+    telemetry, action = Telemetry(system), Action(system)
+    wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
+    action.set_takeoff_altitude(altitude)
+    action.arm()
+    action.takeoff()
+    wait_for(lambda: abs(telemetry.position_velocity_ned().position.down_m + altitude) < 0.1, 20, "takeoff altitude")
+    return telemetry, action
+
+
 def test_mavsdk_goto_location_flies_there_and_holds_facing_the_yaw(px4_system):
     """MAVSDK's Action.goto_location (MAV_CMD_DO_REPOSITION, an AMSL altitude and a yaw in degrees)."""
     server, system = px4_system
-    telemetry, action = Telemetry(system), Action(system)
-    wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
-    action.set_takeoff_altitude(1.5)
-    action.arm()
-    action.takeoff()
-    wait_for(lambda: abs(telemetry.position_velocity_ned().position.down_m + 1.5) < 0.1, 20, "takeoff altitude")
+    telemetry, action = airborne(system)
     home = server.config.home
     lat, lon, amsl = home.to_global((2.0, -1.0, -2.5))
     action.goto_location(lat, lon, amsl, 90.0)
@@ -224,12 +230,7 @@ def test_mavsdk_goto_location_flies_there_and_holds_facing_the_yaw(px4_system):
 
 def test_mavsdk_set_current_speed_set_home_and_terminate(px4_system):
     server, system = px4_system
-    telemetry, action = Telemetry(system), Action(system)
-    wait_for(telemetry.health_all_ok, 15, "MAVSDK health all OK")
-    action.set_takeoff_altitude(1.5)
-    action.arm()
-    action.takeoff()
-    wait_for(lambda: abs(telemetry.position_velocity_ned().position.down_m + 1.5) < 0.1, 20, "takeoff altitude")
+    telemetry, action = airborne(system)
     home = server.config.home
     lat, lon, amsl = home.to_global((12.0, 0.0, -1.5))
     action.goto_location(lat, lon, amsl, 0.0)

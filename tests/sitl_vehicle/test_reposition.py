@@ -123,7 +123,7 @@ def test_home_moves_and_return_goes_to_it():
     (mavlink.MAV_CMD_DO_CHANGE_SPEED, (2.0, 1.0), "speed type 2.0 (a climb or descent speed) is not modelled"),
     (mavlink.MAV_CMD_DO_CHANGE_SPEED, (1.0, 0.0), "Speed change denied: speed 0.0; send m/s above 0"),
     (mavlink.MAV_CMD_DO_SET_HOME, (0.0, 0.0, 0.0, 0.0, NAN, NAN, NAN), "send param1 1 (here) or a latitude"),
-    (mavlink.MAV_CMD_DO_SET_HOME, (0.0, 0.0, 0.0, 0.0, 48.0, 8.5456, 500.0), "km from here; send a place near"),
+    (mavlink.MAV_CMD_DO_SET_HOME, (0.0, 0.0, 0.0, 0.0, 48.0, 8.5456, 500.0), "km from home; send a place near home"),
 ])
 def test_bad_speed_termination_and_home_commands_are_refused_with_the_reason(make_vehicle, command, params, text):
     server, client = make_vehicle()
