@@ -5,10 +5,11 @@ arrive and ``update`` once per control tick with the vehicle's status; it answer
 (a MAV_RESULT plus the reason PX4 would print) and, from ``update``, the armed state and setpoint the
 vehicle core must fly. STATUSTEXT lines it wants sent are queued in ``messages``.
 
-Three parts have modules of their own, mixed into :class:`Commander`: the link-loss failsafes and the
+Four parts have modules of their own, mixed into :class:`Commander`: the link-loss failsafes and the
 pilot's stick takeover (``sitl_vehicle.failsafes``), Return's legs, a mission's items and the requests that load
-and start one (``sitl_vehicle.navigator``) and the stick modes' setpoints (``sitl_vehicle.stick_modes``). Their
-constants, and the types in ``sitl_vehicle.commander_types``, are importable from here too, as before the split.
+and start one (``sitl_vehicle.navigator``), Orbit mode's circle (``sitl_vehicle.orbit``) and the stick modes'
+setpoints (``sitl_vehicle.stick_modes``). Their constants, and the types in ``sitl_vehicle.commander_types``, are
+importable from here too, as before the split.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from sitl_vehicle.navigator import (
     RTL_RETURN,
     Navigator,
 )
+from sitl_vehicle.orbit import Orbit, OrbitMode, starting_orbit
 from sitl_vehicle.params import ParameterStore
 from sitl_vehicle.return_plan import ReturnPlan
 from sitl_vehicle.sim import ManualSetpoint, Setpoint
@@ -77,17 +79,18 @@ ARM_THROTTLE_MAX = 0.6
 ARM_THROTTLE_LOW = 0.2
 
 
-class Commander(Failsafes, Navigator, StickModes):
-    """PX4-like commander/navigator for Takeoff, Hold, Land, Return, Mission (``set_mission``), Offboard, and
-    the stick modes Position, Altitude, Stabilized, Manual and Acro (``manual_control``).
+class Commander(Failsafes, Navigator, OrbitMode, StickModes):
+    """PX4-like commander/navigator for Takeoff, Hold, Land, Return, Mission (``set_mission``), Offboard, Orbit
+    (``orbit``), and the stick modes Position, Altitude, Stabilized, Manual and Acro (``manual_control``).
 
-    ``home`` (local NED) is where the vehicle last armed on the ground, as PX4 sets it; Takeoff altitudes
-    and Return are relative to it.
+    ``home`` (local NED) is where the vehicle last armed on the ground, as PX4 sets it (or a place DO_SET_HOME
+    sent, which arming keeps); Takeoff altitudes and Return are relative to it.
     """
 
     def __init__(self, params: ParameterStore, home: tuple[float, float, float] = (0.0, 0.0, 0.0)):
         self.params = params
         self.home = home
+        self._home_set_manually = False  # by DO_SET_HOME to a place: arming then keeps it, as PX4 does
         self.mode = FlightMode.AUTO_LOITER
         self.armed = False
         self.failsafe = False
@@ -137,6 +140,8 @@ class Commander(Failsafes, Navigator, StickModes):
         self._rtl_plan: ReturnPlan | None = None  # where and how Return flies (set as it begins)
         self._rtl_path_index = 0  # the point of its path being flown to
         self._reposition: tuple[tuple[float, float, float], float] | None = None  # its target and speed
+        self._orbit: Orbit | None = None  # the circle Orbit mode flies
+        self._orbit_approach: tuple[float, float, float] | None = None  # where it flies to reach the circle
 
     # ----------------------------------------------------------------------------------- requests
     def arm(self, status: VehicleStatus, force: bool = False) -> Reply:
@@ -147,7 +152,7 @@ class Commander(Failsafes, Navigator, StickModes):
             if reason:
                 return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, f"Arming denied: {reason}")
         self.armed = True
-        if status.landed:
+        if status.landed and not self._home_set_manually:
             self.home = status.position
         self._armed_at = status.time_s
         self._has_flown = False
@@ -179,6 +184,9 @@ class Commander(Failsafes, Navigator, StickModes):
         if mode is FlightMode.AUTO_MISSION and not self.mission:
             return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED,
                                 "Switching to Mission is currently not possible: no mission (upload one first)")
+        if mode is FlightMode.ORBIT and (not self.armed or status.landed):
+            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED,
+                                "Switching to Orbit is currently not possible: not flying (take off first)")
         if mode.manual and not self._manual_alive(status.time_s):
             return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED,
                                 f"Switching to {mode.label} is currently not possible: no manual control input "
@@ -269,9 +277,12 @@ class Commander(Failsafes, Navigator, StickModes):
         self._disarm("Flight terminated: motors stopped")
         return ACCEPTED
 
-    def set_home(self, place: tuple[float, float, float]) -> Reply:
-        """MAV_CMD_DO_SET_HOME: home (local NED) moves to ``place``; Return and relative altitudes follow it."""
+    def set_home(self, place: tuple[float, float, float], manually: bool = True) -> Reply:
+        """MAV_CMD_DO_SET_HOME: home (local NED) moves to ``place``; Return and relative altitudes follow it. As on
+        PX4, a place sent (``manually``) stays home when the vehicle next arms; home set where the vehicle is moves
+        there again."""
         self.home = place
+        self._home_set_manually = manually
         return ACCEPTED
 
     def gcs_heartbeat(self, time_s: float) -> None:
@@ -354,6 +365,8 @@ class Commander(Failsafes, Navigator, StickModes):
             return Setpoint(position=self._return_target(), yaw=self._hold_yaw)
         if self.mode is FlightMode.AUTO_MISSION and not self.landing and self._climb_requested():
             return Setpoint(position=self._mission_target, yaw=self._hold_yaw, cruise_speed=self._mission_speed)
+        if self.mode is FlightMode.ORBIT and self._orbit is not None:
+            return self._orbit_setpoint(status)
         if self.mode.manual and self._sticks is not None and (not status.landed or self._climb_requested()
                                                               or self.mode.thrust_from_throttle):
             return self._stick_setpoint(status)
@@ -405,6 +418,9 @@ class Commander(Failsafes, Navigator, StickModes):
             self._stick_yawing = False
         elif mode is FlightMode.AUTO_RTL:
             self._begin_return(status, self.mission_seq if from_mission else None)
+        elif mode is FlightMode.ORBIT:
+            self._orbit = starting_orbit(status.position, status.yaw, self.params["MC_ORBIT_RAD_MAX"])
+            self._orbit_approach = None
 
     def _mission_item_reached(self, status: VehicleStatus) -> None:
         self.mission_reached.append(self.mission_seq)
@@ -443,7 +459,7 @@ class Commander(Failsafes, Navigator, StickModes):
             return "position estimate not valid yet"
         if not status.landed:
             return "vehicle is not landed"
-        if self.mode in (FlightMode.AUTO_LAND, FlightMode.AUTO_RTL):
+        if self.mode in (FlightMode.AUTO_LAND, FlightMode.AUTO_RTL, FlightMode.ORBIT):
             return f"{self.mode.label} mode is not armable; switch to Hold or Offboard"
         outside = self._geofence_breach(status, home=status.position)    # home is set where it arms
         if outside and int(self.params["GF_ACTION"]) != GF_NONE:

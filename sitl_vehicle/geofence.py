@@ -84,11 +84,13 @@ def rally_item_from_message(msg, to_local) -> RallyItem:
     return RallyItem(msg.seq, msg.command, msg.frame, params, lat, lon, float(msg.z), north, east)
 
 
-def nearest_safe_point(position: tuple[float, float, float], home: tuple[float, float, float],
+def nearest_safe_point(position: tuple[float, float, float], home: tuple[float, float, float] | None,
                        rally: tuple[RallyItem, ...]) -> tuple[tuple[float, float], int | None]:
     """Where (north, east) a Return goes from ``position``: home or the rally point nearest to it, whichever is
-    nearer (PX4's RTL_TYPE 0), and the rally point's index (None: home)."""
-    places = [((home[0], home[1]), None)] + [((r.north, r.east), i) for i, r in enumerate(rally)]
+    nearer (PX4's RTL_TYPE 0), and the rally point's index (None: home); ``home`` None: the nearest rally point
+    (``rally`` not empty)."""
+    places = [] if home is None else [((home[0], home[1]), None)]
+    places += [((r.north, r.east), i) for i, r in enumerate(rally)]
     return min(places, key=lambda p: math.hypot(p[0][0] - position[0], p[0][1] - position[1]))
 
 

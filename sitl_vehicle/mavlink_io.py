@@ -24,7 +24,9 @@ from sitl_vehicle.manual import ManualControlError, sticks_from_manual_control
 from sitl_vehicle.mission import MAX_DISTANCE_M, SPEED_TYPES_HORIZONTAL, speed_change, valid_speed
 from sitl_vehicle.mission_protocol import MissionProtocol
 from sitl_vehicle.modes import UnsupportedMode, mode_from_custom
+from sitl_vehicle.orbit import YAW_BEHAVIOURS
 from sitl_vehicle.params import ParameterError, ParameterStore
+from sitl_vehicle.requested_streams import STREAMS_WITHOUT_DATA
 from sitl_vehicle.setpoint_messages import (
     SUPPORTED_FRAMES,
     TYPE_MASK_ACCEL,
@@ -235,6 +237,8 @@ class MavlinkVehicleInterface(MissionProtocol):
             return c.start_mission(status, int(_nan_to(p[0], 0)))
         if command == mavlink.MAV_CMD_DO_REPOSITION:
             return self._reposition_command(p, frame, status)
+        if command == mavlink.MAV_CMD_DO_ORBIT:
+            return self._orbit_command(p, frame, status)
         if command == mavlink.MAV_CMD_DO_FLIGHTTERMINATION:
             if not p[0] > 0.5:   # (NaN too)
                 return Reply(mavlink.MAV_RESULT_DENIED, "Flight termination not activated: send param1 1 to stop the "
@@ -277,7 +281,7 @@ class MavlinkVehicleInterface(MissionProtocol):
     def _set_home_command(self, p: tuple, status: VehicleStatus) -> Reply:
         """DO_SET_HOME: param1 1 for where the vehicle is, else param5-7 the place (AMSL, as PX4 reads it)."""
         if p[0] > 0.5:
-            return self.commander.set_home(status.position)
+            return self.commander.set_home(status.position, manually=False)
         lat, lon, alt = p[4], p[5], p[6]
         if not (_is_lat_lon(lat, lon) and math.isfinite(alt)):
             return Reply(mavlink.MAV_RESULT_DENIED, "Set home denied: send param1 1 (here) or a latitude, longitude "
@@ -288,10 +292,36 @@ class MavlinkVehicleInterface(MissionProtocol):
     def _reposition_command(self, p: tuple, frame: int, status: VehicleStatus) -> Reply:
         """DO_REPOSITION: param1 the ground speed (-1: default), param4 the yaw (rad), param5-7 the place (NaN, or
         a latitude or longitude out of range such as COMMAND_INT's INT32_MAX: keep the vehicle's own)."""
+        target, refusal = self._command_place("Reposition", p, frame)
+        return refusal or self.commander.reposition(status, target, p[3], p[0])
+
+    def _orbit_command(self, p: tuple, frame: int, status: VehicleStatus) -> Reply:
+        """DO_ORBIT: param1 the radius (m, its sign the direction: + clockwise), param2 the speed (m/s; negative
+        turns the direction round, as on PX4), param3 the yaw behaviour (ORBIT_YAW_BEHAVIOUR), param5-7 the centre
+        and its altitude above sea level (NaN: keep; an altitude below home is refused)."""
+        behaviour = p[2]
+        if math.isfinite(behaviour) and behaviour not in YAW_BEHAVIOURS:
+            return Reply(mavlink.MAV_RESULT_DENIED, f"Orbit denied: yaw behaviour {behaviour:g} is not one of "
+                                                    "ORBIT_YAW_BEHAVIOUR's 0-4")
+        # PX4 reads DO_ORBIT's altitude above sea level whatever COMMAND_INT's frame says (MAVSDK's do_orbit sends
+        # one in MAV_FRAME_GLOBAL_RELATIVE_ALT), so a height above home sent instead would fly into the ground
+        target, refusal = self._command_place("Orbit", p, mavlink.MAV_FRAME_GLOBAL_INT)
+        home_amsl = self.home.to_global(self.commander.home)[2]
+        if refusal is None and p[6] < home_amsl:
+            refusal = Reply(mavlink.MAV_RESULT_DENIED, f"Orbit denied: altitude {p[6]:g} m is below home "
+                                                       f"({home_amsl:.1f} m above sea level); DO_ORBIT's altitude is "
+                                                       "above sea level")
+        return refusal or self.commander.orbit(status, p[0], p[1], behaviour, target[:2], target[2])
+
+    def _command_place(self, what: str, p: tuple, frame: int) -> tuple[tuple[float, float, float], Reply | None]:
+        """A command's place (param5-7) in the local frame, NaN where it leaves a part out, or the refusal of a
+        frame it cannot be read in or of a place too far from home."""
+        nowhere = (math.nan, math.nan, math.nan)
         if frame not in (mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_FRAME_GLOBAL_INT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
                          mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
-            return Reply(mavlink.MAV_RESULT_DENIED, f"Reposition denied: frame {frame} is not supported; send "
-                                                    "MAV_FRAME_GLOBAL_INT (5) or MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
+            return nowhere, Reply(mavlink.MAV_RESULT_DENIED, f"{what} denied: frame {frame} is not supported; send "
+                                                             "MAV_FRAME_GLOBAL_INT (5) or "
+                                                             "MAV_FRAME_GLOBAL_RELATIVE_ALT_INT (6)")
         lat, lon, alt = p[4], p[5], p[6]
         placed = _is_lat_lon(lat, lon)
         relative = frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
@@ -299,15 +329,16 @@ class MavlinkVehicleInterface(MissionProtocol):
         amsl = alt + home_amsl if relative else alt
         north, east, down = self.home.to_local(lat if placed else self.home.lat_deg,
                                                lon if placed else self.home.lon_deg, amsl)
-        far = _far_from_home("Reposition", lat, lon, north, east) if placed else None
+        far = _far_from_home(what, lat, lon, north, east) if placed else None
         if far:
-            return far
-        target = (north if placed else math.nan, east if placed else math.nan, down if math.isfinite(alt) else math.nan)
-        return self.commander.reposition(status, target, p[3], p[0])
+            return nowhere, far
+        return (north if placed else math.nan, east if placed else math.nan,
+                down if math.isfinite(alt) else math.nan), None
 
     def _set_interval(self, link: UdpLink, msg_id: int, interval_us: float) -> Reply:
         name = _msg_name(msg_id)
-        if name is None or (name not in DEFAULT_STREAMS_HZ and self.build(name, self.telemetry_fn()) is None):
+        if name is None or (name not in DEFAULT_STREAMS_HZ and name not in STREAMS_WITHOUT_DATA
+                            and self.build(name, self.telemetry_fn()) is None):
             return Reply(mavlink.MAV_RESULT_DENIED, f"Message id {msg_id} cannot be streamed")
         schedule = self.schedules[link.name]
         if interval_us == 0 or not math.isfinite(interval_us):

@@ -29,6 +29,9 @@ SUB_AUTO_MISSION = 4
 SUB_AUTO_RTL = 5
 SUB_AUTO_LAND = 6
 
+# PX4 POSCTL sub modes
+SUB_POSCTL_ORBIT = 1
+
 
 class FlightMode(enum.Enum):
     """The modes this vehicle flies; value = (main mode, sub mode, name as PX4 prints it)."""
@@ -40,6 +43,7 @@ class FlightMode(enum.Enum):
     OFFBOARD = (MAIN_OFFBOARD, 0, "Offboard")
     AUTO_MISSION = (MAIN_AUTO, SUB_AUTO_MISSION, "Mission")
     POSCTL = (MAIN_POSCTL, 0, "Position")
+    ORBIT = (MAIN_POSCTL, SUB_POSCTL_ORBIT, "Orbit")  # flown from MAV_CMD_DO_ORBIT's circle, not the sticks
     ALTCTL = (MAIN_ALTCTL, 0, "Altitude")
     STABILIZED = (MAIN_STABILIZED, 0, "Stabilized")
     MANUAL = (MAIN_MANUAL, 0, "Manual")  # a multicopter flies Manual as Stabilized, as PX4's does
@@ -56,8 +60,10 @@ class FlightMode(enum.Enum):
 
     @property
     def manual(self) -> bool:
-        """Flown with the sticks (MANUAL_CONTROL): Position, Altitude, Stabilized, Manual and Acro."""
-        return self.value[0] in (MAIN_POSCTL, MAIN_ALTCTL, MAIN_STABILIZED, MAIN_MANUAL, MAIN_ACRO)
+        """Flown with the sticks (MANUAL_CONTROL): Position, Altitude, Stabilized, Manual and Acro (Orbit, a
+        Position sub mode, flies its circle without them)."""
+        return self is not FlightMode.ORBIT and self.value[0] in (MAIN_POSCTL, MAIN_ALTCTL, MAIN_STABILIZED,
+                                                                  MAIN_MANUAL, MAIN_ACRO)
 
     @property
     def attitude_from_sticks(self) -> bool:
@@ -102,12 +108,15 @@ def mode_from_custom(main_mode: int, sub_mode: int) -> FlightMode:
 
     PX4 treats AUTO with sub mode 0 as Hold-like ready state; we map it to Hold. Position and Altitude
     and, with the attitude and thrust straight from the sticks, Stabilized and Manual are flown with
-    MANUAL_CONTROL sticks (any Position sub mode maps to plain Position), as is Acro, with the body rates
-    from the sticks.
+    MANUAL_CONTROL sticks (Position's Orbit sub mode is Orbit, any other maps to plain Position), as is Acro,
+    with the body rates from the sticks.
     """
     for mode in FlightMode:
+        if mode.value[:2] == (main_mode, sub_mode):
+            return mode
+    for mode in FlightMode:
         main, sub, _ = mode.value
-        if main == main_mode and (sub == sub_mode or main != MAIN_AUTO):
+        if main == main_mode and main != MAIN_AUTO and sub == 0:
             return mode
     if main_mode == MAIN_AUTO and sub_mode in (0, SUB_AUTO_READY):
         return FlightMode.AUTO_LOITER

@@ -115,6 +115,9 @@ COMMANDER_PARAMS = [
     ParamSpec("RTL_TYPE", 0.0, 0.0, 3.0, "enum", "Return to: 0 = home or the nearest rally point, 1 = the nearest "
               "rally point or mission landing (home only with neither), 2 = along the mission to its landing (or back "
               "along it to home), 3 = the nearest of home, a rally point and the mission landing"),
+    ParamSpec("MC_ORBIT_RAD_MAX", 1000.0, 1.0, 10000.0, "m", "Orbit: largest radius a DO_ORBIT may ask for"),
+    ParamSpec("NAV_MC_ALT_RAD", 0.8, 0.05, 200.0, "m", "Orbit: within this of the circle's altitude (and 2 m of "
+              "the circle) the vehicle circles; farther, it first flies to the circle"),
     ParamSpec("RTL_RETURN_ALT", 60.0, 0.0, 150.0, "m", "Return: climb to at least this altitude above home"),
     ParamSpec("RTL_DESCEND_ALT", 30.0, 0.5, 100.0, "m", "Return: descend to this altitude above home, then land"),
     ParamSpec("RTL_LAND_DELAY", 0.0, -1.0, 300.0, "s", "Return: hover this long above home before landing "

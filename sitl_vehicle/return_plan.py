@@ -84,15 +84,6 @@ def _safe_point_plan(place: tuple[float, float], rally: int | None) -> ReturnPla
     return ReturnPlan(place, f"flying to rally point {rally}", f"landing at rally point {rally}")
 
 
-def _nearest_safe_point(rtl_type: int, position: Point, home: Point,
-                        rally: tuple[RallyItem, ...]) -> tuple[tuple[float, float], int | None]:
-    """Home or the nearest rally point, whichever is nearer; RTL_TYPE 1 goes home only with no rally point."""
-    if rtl_type == 1 and rally:
-        index = min(range(len(rally)), key=lambda i: _apart((rally[i].north, rally[i].east), position))
-        return (rally[index].north, rally[index].east), index
-    return nearest_safe_point(position, home, rally)
-
-
 def plan_return(rtl_type: int, position: Point, home: Point, rally: tuple[RallyItem, ...],
                 mission: tuple[MissionItem, ...], mission_seq: int | None = None) -> ReturnPlan:
     """The Return ``RTL_TYPE`` ``rtl_type`` flies from ``position`` (local NED); ``mission_seq``: the item being
@@ -100,7 +91,8 @@ def plan_return(rtl_type: int, position: Point, home: Point, rally: tuple[RallyI
     landing = mission_landing(mission)
     if rtl_type == 2:
         return _along_mission(position, home, mission, landing, mission_seq)
-    place, index = _nearest_safe_point(rtl_type, position, home, rally)
+    # RTL_TYPE 1 goes home only with no rally point
+    place, index = nearest_safe_point(position, None if rtl_type == 1 and rally else home, rally)
     entry = _points(mission, range(landing[0], landing[1] + 1), home[2]) if landing and rtl_type != 0 else []
     if not entry:             # no landing to fly to (or one with no place of its own)
         return _safe_point_plan(place, index)

@@ -124,7 +124,9 @@ class VehicleServer:
                          attitude=est.attitude, angular_velocity=est.angular_velocity, euler=est.euler(),
                          armed=self.sim.armed, landed=self.sim.landed, crashed=self.sim.crashed,
                          mode=self.commander.mode, failsafe=self.commander.failsafe,
-                         throttle=sum(motors) / len(motors))
+                         throttle=sum(motors) / len(motors), imu=self.sim.imu_reading, motors=tuple(motors),
+                         home_down=self.commander.home[2], truth=self.sim.truth,
+                         true_specific_force=self.sim.true_specific_force)
 
     def verdict(self) -> dict:
         sim = self.sim

@@ -15,7 +15,8 @@ Setpoints (:class:`Setpoint`, NaN = axis not controlled):
   finite position axes are planned, the others follow the velocity setpoint;
 * position all NaN, velocity set -> acceleration-limited velocity reference (no planner);
 * acceleration components are passed through where neither position nor velocity is set.
-* yaw: finite ``yaw`` is tracked; else a finite ``yaw_rate`` is integrated; else the heading is held.
+* yaw: finite ``yaw`` is tracked (with a finite ``yaw_rate`` as its feed-forward); else a finite ``yaw_rate`` is
+  integrated; else the heading is held.
 
 :class:`AttitudeSetpoint` (Stabilized flight from the sticks) bypasses position and velocity control: roll
 and pitch angles, a yaw rate, and a throttle mapped to collective thrust as PX4 does (stick centre = hover
@@ -38,7 +39,14 @@ from sitl_vehicle.control.attitude import AttitudeControl
 from sitl_vehicle.control.config import ControlConfig
 from sitl_vehicle.control.mixer import Mixer
 from sitl_vehicle.control.position import PositionControl, PositionControlStates, TrajectorySetpoint
-from sitl_vehicle.control.qmath import bodyz_to_attitude, euler_from_quat, quat_from_euler, wrap_pi, yaw_from_quat
+from sitl_vehicle.control.qmath import (
+    bodyz_to_attitude,
+    euler_from_quat,
+    qrotate_inv,
+    quat_from_euler,
+    wrap_pi,
+    yaw_from_quat,
+)
 from sitl_vehicle.control.rate import RateControl
 from sitl_vehicle.dynamics import QuadDynamics
 from sitl_vehicle.estimator import Estimator
@@ -178,6 +186,8 @@ class VehicleSim:
             self._mark_k = 0
         else:
             self.imu = self.pose_sensor = self.estimator = None
+        self._accel_sample: tuple[float, float, float] | None = None   # the IMU's latest (imu_reading)
+        self._gyro_sample: tuple[float, float, float] | None = None
 
     # ------------------------------------------------------------------ configuration
     def _apply_control_config(self, c: ControlConfig) -> None:
@@ -225,6 +235,20 @@ class VehicleSim:
         if e is None:
             return self.truth
         return VehicleState(e.position, e.velocity, e.attitude_now(), e.omega)
+
+    @property
+    def imu_reading(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """The IMU's latest specific force (m/s², body FRD: about (0, 0, -9.81) at rest) and rates (rad/s), with
+        its noise and biases; without sensor noise, the true ones."""
+        if self.estimator is not None and self._accel_sample is not None:
+            return self._accel_sample, self._gyro_sample
+        return self.true_specific_force, tuple(self.dyn.angular_velocity)
+
+    @property
+    def true_specific_force(self) -> tuple[float, float, float]:
+        """The specific force (m/s², body FRD) over the last physics step: what a perfect accelerometer reads."""
+        a = self.dyn.accel_world
+        return qrotate_inv(self.dyn.attitude, (a[0], a[1], a[2] - GRAVITY))
 
     @property
     def estimate_valid(self) -> bool:
@@ -366,7 +390,9 @@ class VehicleSim:
         dyn = self.dyn
         est = self.estimator
         if est is not None:
-            est.add_gyro(self.imu.gyro(dyn.x[10:13]), self.dt)
+            gyro = self.imu.gyro(dyn.x[10:13])
+            self._gyro_sample = gyro
+            est.add_gyro(gyro, self.dt)
             if k % self._est_div == 0:
                 v = dyn.velocity
                 vm = self._v_mark
@@ -376,6 +402,7 @@ class VehicleSim:
                 if n > 0:
                     f = self.imu.accel_mean(dyn.attitude, (v[0] - vm[0], v[1] - vm[1], v[2] - vm[2]),
                                             n * self.dt, n)
+                    self._accel_sample = f
                     est.predict(f)
             if k % self._pose_div == 0:
                 p, q = self.pose_sensor.measure(dyn.position, dyn.attitude)
@@ -468,7 +495,7 @@ class VehicleSim:
         yaw_rate = sp.yaw_rate
         if _fin(sp.yaw):
             self._yaw_sp = sp.yaw
-            yaw_ff = NAN
+            yaw_ff = yaw_rate if _fin(yaw_rate) else NAN     # both: the rate is the feed-forward, as on PX4
         elif _fin(yaw_rate):
             self._yaw_sp = wrap_pi(self._yaw_sp + yaw_rate * dtp)
             yaw_ff = yaw_rate

@@ -15,6 +15,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander import Commander
 from sitl_vehicle.modes import FlightMode
+from sitl_vehicle.requested_streams import requested_message
+from sitl_vehicle.sim import VehicleState
 
 EARTH_RADIUS_M = 6_378_137.0
 
@@ -34,6 +36,7 @@ DEFAULT_STREAMS_HZ = {
     "SYSTEM_TIME": 1.0,
     "VFR_HUD": 4.0,
     "MISSION_CURRENT": 1.0,
+    "ORBIT_EXECUTION_STATUS": 2.0,  # in Orbit mode only, as PX4 sends it
 }
 
 
@@ -91,6 +94,12 @@ class Telemetry:
     mode: FlightMode
     failsafe: bool
     throttle: float = 0.0
+    # for the streams a client asks for (sitl_vehicle.requested_streams)
+    imu: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.0, 0.0, -9.80665), (0.0, 0.0, 0.0))
+    motors: tuple[float, ...] = ()
+    home_down: float = 0.0                      # home's local down (m), for the altitude above it
+    truth: VehicleState | None = None           # the simulator's ground truth
+    true_specific_force: tuple[float, float, float] = (0.0, 0.0, -9.80665)   # body FRD, m/s²
 
 
 SENSORS_PRESENT = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
@@ -107,7 +116,8 @@ def stream_message(name: str, t: Telemetry, home: Home, commander: Commander, bo
 
     ``home`` places the local frame on the globe, ``commander`` says where home is and whether it is landing, and
     ``boot_wall`` is the wall time the vehicle booted at (SYSTEM_TIME). MISSION_CURRENT is the mission
-    protocol's (``sitl_vehicle.mission_protocol``).
+    protocol's (``sitl_vehicle.mission_protocol``); the streams sent only on request are
+    ``sitl_vehicle.requested_streams``'.
     """
     boot_ms = int(t.time_s * 1000) & 0xFFFFFFFF
     if name == "HEARTBEAT":
@@ -161,6 +171,14 @@ def stream_message(name: str, t: Telemetry, home: Home, commander: Commander, bo
         return mavlink.MAVLink_home_position_message(
             int(lat * 1e7), int(lon * 1e7), int(alt * 1000),
             hx, hy, hz, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(t.time_s * 1e6))
+    if name == "ORBIT_EXECUTION_STATUS":
+        orbit = commander.orbit_flown
+        if orbit is None:
+            return None
+        lat, lon, alt = home.to_global(orbit.centre)     # PX4: MAV_FRAME_GLOBAL, the altitude above sea level
+        return mavlink.MAVLink_orbit_execution_status_message(
+            int(t.time_s * 1e6), math.copysign(orbit.radius, orbit.speed), mavlink.MAV_FRAME_GLOBAL,
+            int(round(lat * 1e7)), int(round(lon * 1e7)), alt)
     if name == "BATTERY_STATUS":
         voltages = [4050] * 4 + [65535] * 6
         return mavlink.MAVLink_battery_status_message(
@@ -177,7 +195,7 @@ def stream_message(name: str, t: Telemetry, home: Home, commander: Commander, bo
         version = (1 << 24) | (15 << 16) | (0 << 8) | 255
         return mavlink.MAVLink_autopilot_version_message(caps, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
                                                          0, 0, 0x464C4F57)
-    return None
+    return requested_message(name, t, home)
 
 
 def truth_odometry(time_s: float, position, attitude, velocity_ned, angular_velocity):

@@ -64,12 +64,13 @@ TARGETS: dict[str, tuple[list[str], list[str]]] = {
     "sitl_vehicle.dynamics": (["sitl_vehicle/dynamics.py"],
                               ["tests/sitl_vehicle/test_dynamics.py", "tests/sitl_vehicle/test_wind.py"]),
     "sitl_vehicle.commander": ([f"sitl_vehicle/{m}.py" for m in ("commander", "failsafes", "navigator", "stick_modes",
-                                                                  "geofence", "return_plan",
+                                                                  "geofence", "return_plan", "orbit",
                                                                   "commander_types")],
                                [f"tests/sitl_vehicle/test_{t}.py" for t in ("commander", "takeoff", "mission",
                                                                             "manual", "acro", "geofence",
                                                                             "rally", "return_types",
-                                                                            "mission_items", "reposition")]),
+                                                                            "mission_items", "reposition",
+                                                                            "orbit")]),
 }
 
 STAGING_PYPROJECT = """\

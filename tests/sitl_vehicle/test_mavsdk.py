@@ -228,6 +228,43 @@ def test_mavsdk_goto_location_flies_there_and_holds_facing_the_yaw(px4_system):
     wait_for(lambda: abs(telemetry.heading().heading_deg - 90.0) < 3.0, 10, "facing east")
 
 
+def test_mavsdk_do_orbit_flies_round_the_centre_facing_it(px4_system):
+    """MAVSDK's Action.do_orbit: MAV_CMD_DO_ORBIT as COMMAND_INT, whose altitude is above sea level (in a frame that
+    says relative, as MAVSDK sends it and PX4 reads it)."""
+    from mavsdk.plugins.action import OrbitYawBehavior
+
+    server, system = px4_system
+    telemetry, action = airborne(system)
+    lat, lon, amsl = server.config.home.to_global((3.0, 0.0, -2.0))
+    action.do_orbit(2.0, 1.0, OrbitYawBehavior.HOLD_FRONT_TO_CIRCLE_CENTER, lat, lon, amsl)
+    assert server.commander.mode.label == "Orbit"
+
+    def round_the_centre(lowest_east: float, highest_east: float) -> bool:
+        north, east, down = server.sim.truth.position
+        return (abs(math.hypot(north - 3.0, east) - 2.0) < 0.15 and abs(down + 2.0) < 0.1
+                and lowest_east <= east <= highest_east)
+
+    wait_for(lambda: round_the_centre(1.5, 2.0), 30, "the circle's east side")      # clockwise from the west:
+    wait_for(lambda: round_the_centre(-2.0, -1.5), 30, "its west side")             # north, east, south, west
+    heading = telemetry.heading().heading_deg
+    north, east, _ = server.sim.truth.position
+    assert abs(math.remainder(math.radians(heading) - math.atan2(-east, 3.0 - north), 2 * math.pi)) < 0.15
+
+
+def test_mavsdk_telemetry_rates_a_script_sets_are_accepted_and_their_streams_come(px4_system):
+    """MAVSDK's Telemetry.set_rate_* for the streams PX4 sends on request (the IMU, altitude, odometry, ground truth,
+    actuator outputs; RC and rangefinder accepted with nothing to send), each a COMMAND_DENIED error before."""
+    server, system = px4_system
+    telemetry = Telemetry(system)
+    for what in ("imu", "scaled_imu", "altitude", "odometry", "ground_truth", "actuator_output_status", "rc_status",
+                 "distance_sensor"):
+        getattr(telemetry, f"set_rate_{what}")(10.0)
+    wait_for(lambda: abs(telemetry.imu().acceleration_frd.down_m_s2 + 9.81) < 0.05, 5, "the IMU at rest")
+    home = server.config.home
+    wait_for(lambda: abs(telemetry.ground_truth().latitude_deg - home.lat_deg) < 1e-6, 5, "the ground truth")
+    wait_for(lambda: abs(telemetry.altitude().altitude_amsl_m - home.alt_m) < 0.05, 5, "the altitude")
+
+
 def test_mavsdk_set_current_speed_set_home_and_terminate(px4_system):
     server, system = px4_system
     telemetry, action = airborne(system)

@@ -59,6 +59,7 @@ def test_the_nearest_safe_point_is_home_or_the_nearest_rally_point():
     assert nearest_safe_point((28.0, 1.0, -3.0), (1.0, 2.0, 0.0), ()) == ((1.0, 2.0), None)
     east_of_home = (rally(0, 5.0, 10.0),)                 # decided by the east: home 10 m away, the point 5 m
     assert nearest_safe_point((0.0, 10.0, -3.0), (0.0, 0.0, 0.0), east_of_home)[1] == 0
+    assert nearest_safe_point((2.0, 1.0, -3.0), None, points)[1] == 1   # no home (RTL_TYPE 1): the nearest point
 
 
 def status(t, pos, landed=False, armed=True) -> VehicleStatus:

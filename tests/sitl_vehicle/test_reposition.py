@@ -109,6 +109,15 @@ def test_flight_termination_stops_the_motors_in_the_air():
     assert c.messages[-1] == (mavlink.MAV_SEVERITY_INFO, "Flight terminated: motors stopped")
 
 
+def test_a_home_sent_stays_home_when_the_vehicle_arms_and_one_set_here_moves_with_it():
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    assert c.set_home((10.0, -4.0, -1.0)).accepted
+    assert c.arm(status(0.0, pos=(2.0, 3.0, 0.0))).accepted and c.home == (10.0, -4.0, -1.0)   # kept, as PX4
+    assert c.disarm(status(1.0, pos=(2.0, 3.0, 0.0), armed=True)).accepted
+    assert c.set_home((2.0, 3.0, 0.0), manually=False).accepted                              # "here"
+    assert c.arm(status(2.0, pos=(5.0, 1.0, 0.0))).accepted and c.home == (5.0, 1.0, 0.0)      # where it arms
+
+
 def test_home_moves_and_return_goes_to_it():
     c = flying()
     assert c.set_home((10.0, -4.0, -1.0)).accepted and c.home == (10.0, -4.0, -1.0)
