@@ -64,3 +64,15 @@ def edge_distance_px(mask: np.ndarray, point: Point) -> float:
     m = np.zeros((h + 2, w + 2), np.uint8)
     m[1:-1, 1:-1] = mask.astype(bool)
     return float(cv2.distanceTransform(m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[v + 1, u + 1])
+
+
+def thickness_from_sidestep(aperture_shift_px: float, wall_shift_px: float, distance_m: float) -> float | None:
+    """The wall's thickness from a step sideways square to it, ``distance_m`` from its face (measured, not flown:
+    ``python -m tools.thickness_look``).  Seen from within the opening's width, what shows through it is bounded by
+    its far edges, a thickness t behind the face: it shifts across the image as a thing ``distance_m`` + t away
+    does (``aperture_shift_px``), the face beside it as one ``distance_m`` away (``wall_shift_px``), so
+    t = d·(wall shift / aperture shift − 1).  None where the two shifts are not the same way round, or the
+    aperture's is the larger (nothing behind the face)."""
+    if aperture_shift_px * wall_shift_px <= 0.0 or abs(aperture_shift_px) > abs(wall_shift_px):
+        return None
+    return distance_m * (wall_shift_px / aperture_shift_px - 1.0)

@@ -315,12 +315,24 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> tuple[list[di
     return rows, judge_scene(rows, tracker.config, servo)
 
 
+def flow_backend_or_say(spec: str, prog: str):
+    """The flow backend ``spec`` names (as flowgap-companion --flow), or None after a one-line error naming it."""
+    from companion.flow.base import FlowError
+    from companion.flow.registry import make_flow_backend, parse_backend
+
+    try:
+        name, options = parse_backend(spec)
+        return make_flow_backend(name, **options)
+    except (ValueError, KeyError, FlowError) as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return None
+
+
 def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     from companion.edges import EDGE_MODES
-    from companion.flow.base import FlowError
-    from companion.flow.registry import DEFAULT_FLOW, make_flow_backend
+    from companion.flow.registry import DEFAULT_FLOW
     from companion.servo import ServoConfig
     from scenes import PinholeCamera
 
@@ -352,13 +364,8 @@ def main(argv: list[str] | None = None) -> int:
         print("size_error: --scenes and --pairs must be at least 1, --band between 0 and 0.2 m, and --distance "
               "NEAR FAR with 0.3 <= NEAR < FAR", file=sys.stderr)
         return 2
-    try:
-        from companion.flow.registry import parse_backend
-
-        name, options = parse_backend(args.flow)
-        backend = make_flow_backend(name, **options)
-    except (ValueError, KeyError, FlowError) as exc:
-        print(f"size_error: {exc}", file=sys.stderr)
+    backend = flow_backend_or_say(args.flow, "size_error")
+    if backend is None:
         return 2
     camera, rows, scenes = PinholeCamera(), [], []
     for index in tqdm(range(args.scenes), desc="scenes", unit="scene"):

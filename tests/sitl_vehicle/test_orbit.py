@@ -8,7 +8,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from sitl_vehicle.commander import Commander
+from sitl_vehicle.commander import Commander, VehicleStatus
 from sitl_vehicle.mavlink_io import Home
 from sitl_vehicle.modes import FlightMode, mode_from_custom
 from sitl_vehicle.orbit import (
@@ -201,3 +201,65 @@ def test_an_orbit_over_mavlink_flies_the_circle_and_reports_it(make_vehicle):
                                           mavlink.MAVLINK_MSG_ID_ORBIT_EXECUTION_STATUS, 0, 0, 0, 0, 0, 0)
     ack = client.recv("COMMAND_ACK", 3, lambda m: m.command == mavlink.MAV_CMD_REQUEST_MESSAGE)
     assert ack.result == mavlink.MAV_RESULT_DENIED
+
+
+def test_the_geometry_off_the_origin_and_near_the_centre():
+    """A centre away from the origin, a vehicle off both axes, and one within a metre of the centre."""
+    o = Orbit((3.0, -2.0, -4.0), 5.0, 2.0, YAW_FRONT_TANGENT)
+    here = (6.0, 2.0, -4.0)                                          # 3 m north and 4 m east of it: on the circle
+    assert on_circle(o, here, 0.8) and not on_circle(o, (9.0, 6.0, -4.0), 0.8)
+    sp = circle_setpoint(o, here)
+    assert sp.velocity[:2] == pytest.approx((-1.6, 1.2))             # the tangent, clockwise
+    assert sp.acceleration[:2] == pytest.approx((-0.48, -0.64))      # v²/r = 0.8 m/s² towards the centre
+    assert (sp.yaw, sp.yaw_rate) == (pytest.approx(math.atan2(1.2, -1.6)), pytest.approx(0.4))   # along it
+    assert approach_point(o, (-7.0, -2.0, 0.0)) == pytest.approx((-2.0, -2.0, -4.0))     # from due south
+    assert approach_point(o, (3.0, -1.5, 0.0)) == pytest.approx((3.0, 3.0, -4.0))        # 0.5 m east of the centre
+    assert facing_centre(o, (3.0, -1.5, 0.0)) == pytest.approx(-math.pi / 2)
+    assert facing_centre(o, (8.0, -2.0, 0.0)) == pytest.approx(math.pi)                  # due north: face south
+    assert facing_centre(o, (6.0, 2.0, 0.0)) == pytest.approx(math.atan2(-4.0, -3.0))
+    small = Orbit((3.0, -2.0, -4.0), 1.0, 1.0)
+    assert circle_setpoint(small, (3.0, -1.5, -4.0)).velocity[:2] == pytest.approx((-1.0, 0.5))   # out, and round
+    edge = Orbit((0.0, 0.0, -2.0), 5.0, 1.0)
+    assert not on_circle(edge, (7.0, 0.0, -2.0), 0.8)                # exactly 2 m off: not on it
+    assert not on_circle(edge, (5.0, 0.0, -2.5), 0.5)                # exactly the acceptance below: not on it
+
+
+def test_a_command_keeps_or_sets_the_direction_as_px4_does():
+    slow = Orbit((0.0, 0.0, -2.0), 4.0, 0.5)
+    assert commanded_orbit(slow, 0.0, 1000.0, speed=1.0).speed == 1.0              # clockwise stays clockwise
+    assert commanded_orbit(slow, 0.0, 1000.0, radius=0.5, speed=1.0).speed == 1.0  # a radius above 0: clockwise
+    assert commanded_orbit(slow, 0.0, 1000.0, radius=0.0, speed=1.0).speed == -1.0  # 0: counter-clockwise
+    stopped = commanded_orbit(slow, 0.0, 1000.0, speed=0.0)
+    assert stopped.speed == 0.0 and commanded_orbit(stopped, 0.0, 1000.0, speed=1.0).speed == -1.0
+
+
+def test_the_commander_s_orbit_in_its_words_and_setpoints():
+    c = flying()
+    here = air(1.0, 0.0, 0.0, -2.0)
+    assert c.orbit(VehicleStatus(time_s=1.0, position=(0.0, 0.0, -2.0), velocity=(0.0, 0.0, 0.0), yaw=0.7,
+                                 armed=True, landed=False), radius=-3.0, speed=0.5, centre_ne=(3.0, -2.0),
+                   yaw_behaviour=float(YAW_HOLD_INITIAL_HEADING)).accepted
+    assert c.messages[-1][1] == ("Orbit: 3.0 m round 3.0 m north, -2.0 m east, 2.0 m above home, 0.5 m/s "
+                                 "counter-clockwise")
+    sp = c.update(air(2.0, 3.0, 1.0, -2.0)).setpoint                   # on the circle: the heading commanded at
+    assert sp.yaw == pytest.approx(0.7)
+    assert c.orbit(here, radius=3.0, speed=0.5).accepted and c.messages[-1][1].endswith("0.5 m/s clockwise")
+    assert c.orbit(here, speed=0.0).accepted and c.messages[-1][1].endswith("0.0 m/s counter-clockwise")
+    assert c.set_mode(FlightMode.AUTO_LOITER, air(3.0, 3.0, 1.0, -2.0)).accepted
+    hold = c.update(air(3.1, 3.0, 1.0, -2.0)).setpoint                 # Hold after Orbit: its own place
+    assert hold.position == pytest.approx((3.0, 1.0, -2.0)) and math.isnan(hold.velocity[0])
+    assert c.set_mode(FlightMode.ORBIT, air(4.0, 3.0, 4.0, -2.5)).accepted
+    sp = c.update(air(5.0, 3.0, 8.0, -2.5)).setpoint                   # blown 4 m off its 1 m circle: back to it
+    assert sp.position == pytest.approx((3.0, 5.0, -2.5))
+
+
+def test_orbit_mode_is_refused_armed_on_the_ground_in_words():
+    c = Commander(ParameterStore(COMMANDER_PARAMS))
+    assert c.arm(status(0.0)).accepted
+    for request in (lambda: c.set_mode(FlightMode.ORBIT, status(0.1, armed=True)),
+                    lambda: c.orbit(status(0.1, armed=True), radius=3.0)):
+        reply = request()
+        assert reply.result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+        assert "not flying (take off first)" in reply.text and c.mode is FlightMode.AUTO_LOITER
+    assert c.set_mode(FlightMode.ORBIT, status(0.1)).text == ("Switching to Orbit is currently not possible: not "
+                                                              "flying (take off first)")
