@@ -51,7 +51,9 @@ INT_RANGES = {"int8_t": (-128, 127), "uint8_t": (0, 255), "int16_t": (-(1 << 15)
 COMMANDS = [mavlink.MAV_CMD_COMPONENT_ARM_DISARM, mavlink.MAV_CMD_NAV_TAKEOFF, mavlink.MAV_CMD_NAV_LAND,
             mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_CMD_MISSION_START,
             mavlink.MAV_CMD_DO_SET_MISSION_CURRENT, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
-            mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES]
+            mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+            mavlink.MAV_CMD_DO_REPOSITION, mavlink.MAV_CMD_DO_CHANGE_SPEED, mavlink.MAV_CMD_DO_SET_HOME,
+            mavlink.MAV_CMD_DO_LAND_START, mavlink.MAV_CMD_DO_FLIGHTTERMINATION, mavlink.MAV_CMD_DO_ORBIT]
 NASTY_FLOATS = st.sampled_from([math.nan, math.inf, -math.inf, 0.0, -0.0, 1e38, -1e38, 21196.0, 1.0, 0.5, 1e-45])
 
 
