@@ -116,8 +116,8 @@ def stream_message(name: str, t: Telemetry, home: Home, commander: Commander, bo
 
     ``home`` places the local frame on the globe, ``commander`` says where home is and whether it is landing, and
     ``boot_wall`` is the wall time the vehicle booted at (SYSTEM_TIME). MISSION_CURRENT is the mission
-    protocol's (``sitl_vehicle.mission_protocol``); the streams sent only on request are
-    ``sitl_vehicle.requested_streams``'.
+    protocol's (``sitl_vehicle.mission_protocol``); the streams sent only on request are built in
+    ``sitl_vehicle.requested_streams``.
     """
     boot_ms = int(t.time_s * 1000) & 0xFFFFFFFF
     if name == "HEARTBEAT":
