@@ -214,7 +214,7 @@ class MavlinkVehicleInterface(MissionProtocol):
             # PX4: param7 is AMSL (NaN: the minimum, MIS_TAKEOFF_ALT above home; the commander raises lower ones);
             # param4, the yaw, is ignored on multicopters; params 5/6 are lat/lon, and NaN or both exactly 0
             # (zero-initialised, as MAVProxy's `takeoff` sends them; PX4 PR #28792) mean "where it is"
-            home_amsl = self.home.to_global(c.home)[2]
+            home_amsl = self._home_amsl()
             above_home = p[6] - home_amsl if math.isfinite(p[6]) else math.nan
             lat, lon = p[4], p[5]
             target_xy = None
@@ -306,7 +306,7 @@ class MavlinkVehicleInterface(MissionProtocol):
         # PX4 reads DO_ORBIT's altitude above sea level whatever COMMAND_INT's frame says (MAVSDK's do_orbit sends
         # one in MAV_FRAME_GLOBAL_RELATIVE_ALT), so a height above home sent instead would fly into the ground
         target, refusal = self._command_place("Orbit", p, mavlink.MAV_FRAME_GLOBAL_INT)
-        home_amsl = self.home.to_global(self.commander.home)[2]
+        home_amsl = self._home_amsl()
         if refusal is None and p[6] < home_amsl:
             refusal = Reply(mavlink.MAV_RESULT_DENIED, f"Orbit denied: altitude {p[6]:g} m is below home "
                                                        f"({home_amsl:.1f} m above sea level); DO_ORBIT's altitude is "
@@ -325,7 +325,7 @@ class MavlinkVehicleInterface(MissionProtocol):
         lat, lon, alt = p[4], p[5], p[6]
         placed = _is_lat_lon(lat, lon)
         relative = frame in (mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
-        home_amsl = self.home.to_global(self.commander.home)[2]
+        home_amsl = self._home_amsl()
         amsl = alt + home_amsl if relative else alt
         north, east, down = self.home.to_local(lat if placed else self.home.lat_deg,
                                                lon if placed else self.home.lon_deg, amsl)
@@ -334,6 +334,10 @@ class MavlinkVehicleInterface(MissionProtocol):
             return nowhere, far
         return (north if placed else math.nan, east if placed else math.nan,
                 down if math.isfinite(alt) else math.nan), None
+
+    def _home_amsl(self) -> float:
+        """Home's altitude above sea level (m): where the commander's home is, on the globe."""
+        return self.home.to_global(self.commander.home)[2]
 
     def _set_interval(self, link: UdpLink, msg_id: int, interval_us: float) -> Reply:
         name = _msg_name(msg_id)

@@ -12,6 +12,7 @@ import math
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_vehicle.airframes import GRAVITY
 from sitl_vehicle.control.qmath import qrotate_inv
 
 STREAMS_WITHOUT_DATA = ("RC_CHANNELS", "DISTANCE_SENSOR")
@@ -35,23 +36,23 @@ def _int16(value: float) -> int:
     return int(max(-32768, min(32767, round(value))))
 
 
-def requested_message(name: str, t, home):
-    """One of these messages from a telemetry snapshot ``t`` (:class:`sitl_vehicle.telemetry.Telemetry`) and the
-    local frame's place on the globe ``home``; None for any other name."""
+def requested_message(name: str, t, home, home_down: float):
+    """One of these messages from a telemetry snapshot ``t`` (:class:`sitl_vehicle.telemetry.Telemetry`), the
+    local frame's place on the globe ``home`` and home's local down (m, the commander's); None for any other name."""
     usec = int(t.time_s * 1e6)
     if name in ("HIGHRES_IMU", "SCALED_IMU"):
         accel, gyro = t.imu
         mag = qrotate_inv(t.attitude, EARTH_FIELD_GAUSS)
         if name == "SCALED_IMU":   # mG, mrad/s, mgauss, centi-degrees
             return mavlink.MAVLink_scaled_imu_message(
-                int(t.time_s * 1000) & 0xFFFFFFFF, *(_int16(a / 9.80665 * 1000) for a in accel),
+                int(t.time_s * 1000) & 0xFFFFFFFF, *(_int16(a / GRAVITY * 1000) for a in accel),
                 *(_int16(g * 1000) for g in gyro), *(_int16(m * 1000) for m in mag), _int16(TEMPERATURE_C * 100))
         amsl = home.to_global(t.position)[2]
         return mavlink.MAVLink_highres_imu_message(usec, *accel, *gyro, *mag, pressure_hpa(amsl), 0.0, amsl,
                                                    TEMPERATURE_C, HIGHRES_FIELDS, 0)
     if name == "ALTITUDE":
         amsl = home.to_global(t.position)[2]
-        return mavlink.MAVLink_altitude_message(usec, amsl, amsl, -t.position[2], t.home_down - t.position[2],
+        return mavlink.MAVLink_altitude_message(usec, amsl, amsl, -t.position[2], home_down - t.position[2],
                                                 math.nan, math.nan)
     if name == "ODOMETRY":         # the estimate as PX4 sends it: the velocity in the body frame
         return mavlink.MAVLink_odometry_message(
@@ -65,7 +66,7 @@ def requested_message(name: str, t, home):
         return mavlink.MAVLink_hil_state_quaternion_message(
             usec, list(truth.attitude), *truth.angular_velocity, int(round(lat * 1e7)), int(round(lon * 1e7)),
             int(round(alt * 1000)), *(_int16(v * 100) for v in truth.velocity), speed_cm, speed_cm,
-            *(_int16(a / 9.80665 * 1000) for a in t.true_specific_force))
+            *(_int16(a / GRAVITY * 1000) for a in t.true_specific_force))
     if name == "ACTUATOR_OUTPUT_STATUS":
         outputs = list(t.motors) + [0.0] * (32 - len(t.motors))
         return mavlink.MAVLink_actuator_output_status_message(usec, (1 << len(t.motors)) - 1, outputs)

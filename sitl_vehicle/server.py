@@ -125,8 +125,7 @@ class VehicleServer:
                          armed=self.sim.armed, landed=self.sim.landed, crashed=self.sim.crashed,
                          mode=self.commander.mode, failsafe=self.commander.failsafe,
                          throttle=sum(motors) / len(motors), imu=self.sim.imu_reading, motors=tuple(motors),
-                         home_down=self.commander.home[2], truth=self.sim.truth,
-                         true_specific_force=self.sim.true_specific_force)
+                         truth=self.sim.truth, true_specific_force=self.sim.true_specific_force)
 
     def verdict(self) -> dict:
         sim = self.sim

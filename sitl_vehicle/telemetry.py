@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import common as mavlink
 
+from sitl_vehicle.airframes import GRAVITY
 from sitl_vehicle.commander import Commander
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.requested_streams import requested_message
@@ -95,11 +96,10 @@ class Telemetry:
     failsafe: bool
     throttle: float = 0.0
     # for the streams a client asks for (sitl_vehicle.requested_streams)
-    imu: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.0, 0.0, -9.80665), (0.0, 0.0, 0.0))
+    imu: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.0, 0.0, -GRAVITY), (0.0, 0.0, 0.0))
     motors: tuple[float, ...] = ()
-    home_down: float = 0.0                      # home's local down (m), for the altitude above it
     truth: VehicleState | None = None           # the simulator's ground truth
-    true_specific_force: tuple[float, float, float] = (0.0, 0.0, -9.80665)   # body FRD, m/s²
+    true_specific_force: tuple[float, float, float] = (0.0, 0.0, -GRAVITY)   # body FRD, m/s²
 
 
 SENSORS_PRESENT = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
@@ -195,7 +195,7 @@ def stream_message(name: str, t: Telemetry, home: Home, commander: Commander, bo
         version = (1 << 24) | (15 << 16) | (0 << 8) | 255
         return mavlink.MAVLink_autopilot_version_message(caps, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
                                                          0, 0, 0x464C4F57)
-    return requested_message(name, t, home)
+    return requested_message(name, t, home, commander.home[2])
 
 
 def truth_odometry(time_s: float, position, attitude, velocity_ned, angular_velocity):

@@ -73,7 +73,8 @@ def write_result(out: Path, key: str, row: dict, settings: dict) -> Path:
 
 
 def record_run(out: Path, wall_s: float, flown: int | None, ended: str) -> None:
-    """Add one run of the sweep in ``out`` to its record (``ended``: "complete", "interrupted", "failed")."""
+    """Add one run of the sweep in ``out`` to its record (``ended``: "complete", "stopped" (flights left to fly),
+    "interrupted", "failed")."""
     out.mkdir(parents=True, exist_ok=True)
     with (out / RUNS).open("a") as f:
         f.write(json.dumps({"wall_s": round(wall_s, 1), "flown": flown, "ended": ended}) + "\n")
