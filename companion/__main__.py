@@ -20,6 +20,7 @@ from companion.lockstep import open_clock
 from companion.mission import Mission
 from companion.mission_config import MissionConfig, State
 from companion.runlog import RunLog
+from companion.thickness import ThicknessLookConfig
 
 log = logging.getLogger("flowgap-companion")
 
@@ -57,6 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "again by which of the two depths predicts the next frame's colour (companion.edges); flow "
                         "keeps the detector's mask as the flow shows it (blurred by a pixel or more, the behaviour "
                         "before 2026-12-06)")
+    p.add_argument("--no-thickness-look", action="store_true",
+                   help="judge an opening near the vehicle's need by the wall depth assumed (0.15 m) instead of "
+                        "reading the wall's depth from a sidestep square to it first (companion.thickness)")
     p.add_argument("--render-backend", choices=["cpu", "torch"], default="cpu", help="splat renderer")
     p.add_argument("--altitude", type=float, default=1.5, help="takeoff altitude in metres (default 1.5)")
     p.add_argument("--finish", choices=["hold", "land"], default="hold", help="after the traversal (default hold)")
@@ -178,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     mission = Mission(link, camera, flow, detector, runlog,
                       config=MissionConfig(altitude_m=args.altitude, finish=args.finish,
                                            perception_latency_s=args.latency), recording=recording,
-                      blind_detector=blind, edges=edges_for(args.edges))
+                      blind_detector=blind, edges=edges_for(args.edges),
+                      thickness=ThicknessLookConfig(enabled=not args.no_thickness_look))
     signal.signal(signal.SIGTERM, _interrupt)  # the launcher stops us with SIGTERM: end like Ctrl-C
     try:
         result = mission.run()

@@ -38,18 +38,20 @@ from companion.servo import (
     probe_aside_m,
     servo_step,
 )
+from companion.thickness import ThicknessLookConfig
+from companion.thickness_flight import ThicknessLook
 from companion.tracking import CentroidFilter, ConfirmingCentroidFilter
 from companion.wall import WallTrack, wall_ahead_words
 
 log = logging.getLogger(__name__)
 
 
-class Mission:
+class Mission(ThicknessLook):
     def __init__(self, link: AutopilotLink, camera: FrameSource, flow, detector, runlog: RunLog,
                  servo: ServoConfig | None = None, config: MissionConfig | None = None,
                  tracker: CentroidFilter | None = None, derotate_flow: bool = True,
                  openings: OpeningConfig | None = None, recording=None, blind_detector=None,
-                 edges: EdgeConfig | None = DEFAULT_EDGES):
+                 edges: EdgeConfig | None = DEFAULT_EDGES, thickness: ThicknessLookConfig | None = None):
         self.link = link
         self.camera = camera
         self.flow = flow
@@ -71,6 +73,8 @@ class Mission:
         # repeating the last step (measured: re-applied 0.25 m steps towards a stale image position ran a
         # vehicle 2 m sideways).
         self.openings = openings or OpeningConfig()
+        self.thickness = thickness or ThicknessLookConfig()
+        self._thickness_looked = False   # the wall's thickness is looked at once a flight (one wall)
         self.derotate = derotate_flow
         self.result = MissionResult(State.CONNECT)
         self.clock = link.clock     # every wait and timeout on the link's clock (wall, or lockstep)
@@ -289,6 +293,23 @@ class Mission:
 
             # a refusal's own frame is logged too, holding: the estimate that decided it is in the decision log
             hold = ServoStep((0.0, 0.0, 0.0), None, False, False)
+            if self._thickness_due(sight, view):
+                # judged too near the need to tell by the depth assumed: read the wall's, judge again by it, and go
+                # on from here with the step this frame gives (no push on it: the next frame decides)
+                lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))
+                resume = dataclasses.replace(next_look_step(view, k, width, height, cfg, wall_prior,
+                                                            openings.last_accepted, lag), push=False)
+                observed["note"] = "; ".join(filter(None, [observed["note"], "the wall's thickness read next"]))
+                self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed)
+                thickness = self._thickness_look(sight, view, position, openings)
+                if thickness is not None:
+                    cfg = dataclasses.replace(cfg, wall_thickness_m=thickness)
+                prev, prev_position, prev_attitude = self._back_from_the_look(waypoint, n + 1)
+                base += 1           # the look's frames are not the servo's: a new first frame
+                self._frame_base = n + 2
+                self.result.servo_steps = self._steps_before + k + 1
+                step = resume
+                continue
             if sight.refusal:
                 self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed, sight.refusal)
                 raise Refusal(sight.refusal, openings.world.used, openings.alternative())

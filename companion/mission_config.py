@@ -90,6 +90,8 @@ class MissionResult:
     push_length_m: float | None = None
     heading_rad: float | None = None    # the heading flown along (NED yaw): the yaw at the offboard start
     wall_turn_rad: float | None = None  # the wall's turn against the heading at the push, as measured
+    wall_thickness_m: float | None = None  # the wall's depth, read by the thickness look (None: assumed)
+    thickness_look: dict | None = None     # what that look saw and made of it (None: no look)
 
     def as_dict(self) -> dict:
         d = asdict(self)

@@ -111,6 +111,7 @@ class Sight:
     estimate_m: float | None = None  # this frame's own clear-radius estimate of it (None: this frame gave none)
     estimate_px: float | None = None  # ... from this clear radius of its mask, in the wall's plane (pixels)
     judged: bool = False            # ... and it counts among those that judge the opening (see observe)
+    judged_m: float | None = None   # the clear radius the fit is judged by (None: not judged yet)
 
 
 def candidates_in(detection, K: np.ndarray, attitude, heading: float | None = None) -> list[Candidate]:
@@ -169,6 +170,11 @@ class OpeningTracker:
         self.places: list[Point] = []       # the tracked clear centre's accepted places (right, down), metres
         self.close_places = 0               # ... how many of them with the wall within decide_within_m
         self.radius_trail: list[float] = []  # the clear radius (upper quartile) after each of its estimates
+        # where each estimate of radii, close_radii and near_radii was taken: (depth scaled by, the wall's turn), to
+        # take it to another wall thickness (set_wall_thickness)
+        self.radii_at: list[tuple[float, float | None]] = []
+        self.close_at: list[tuple[float, float | None]] = []
+        self.near_at: list[tuple[float, float | None]] = []
         self.switched = False
         self._announced = False
         self.separation_px = math.inf       # the closest two openings have been to each other in one frame
@@ -331,13 +337,17 @@ class OpeningTracker:
         judged_here = False
         if estimated:
             estimate, estimate_px = radius_m(chosen[0]), radius_px(chosen[0].detection)
+            at = (depth(chosen[0].target_px), wall_yaw_rad)
             self.radii.append(estimate)
+            self.radii_at.append(at)
             judged_here = (math.dist(chosen[1], across_m) <= self.config.judge_offset_m
                            and wall_distance_m <= self.config.decide_within_m and moved_m >= self.config.judge_step_m)
             if judged_here:
                 self.close_radii.append(estimate)
+                self.close_at.append(at)
             if wall_distance_m <= self.config.decide_within_m:
                 self.near_radii.append(estimate)
+                self.near_at.append(at)
             self.places.append(chosen[1])
             self.close_places += wall_distance_m <= self.config.decide_within_m
         # the opening does not move: its place is the median of the latest sightings (each jitters by a few px)
@@ -361,6 +371,8 @@ class OpeningTracker:
                 self.world.seed(p)
                 self.radii, self.close_radii, self.places, self.radius_trail = [r], [r], [p], [r]
                 self.near_radii = [r]
+                at = (depth(c.target_px), wall_yaw_rad)
+                self.radii_at, self.close_at, self.near_at = [at], [at], [at]
                 self.close_places = 1        # judged from within decide_within_m, as every switch is
                 self.switched = True
                 target, radius, chosen = p, r, (c, p)
@@ -383,14 +395,39 @@ class OpeningTracker:
                                        focal_px) if chosen[0].detection.mask.any() else 0.0
         return Sight(chosen[0].detection if chosen is not None else None, used, offset, steady, here,
                      len(self.places), self.close_places, len(self.close_radii), note, refusal, estimate, estimate_px,
-                     judged_here)
+                     judged_here, radius if judged else None)
 
     def _forget_history(self) -> None:
         """Drop what was kept of the tracked opening (its places, size estimates and sighting counts): what comes
         next is another opening, or a better placed one."""
         self.radii, self.close_radii, self.places, self.radius_trail = [], [], [], []
         self.near_radii = []
+        self.radii_at, self.close_at, self.near_at = [], [], []
         self.close_places = 0
+
+    def set_wall_thickness(self, thickness_m: float) -> None:
+        """Judge by a wall ``thickness_m`` deep from now on (companion.thickness measured it), and take the tracked
+        opening's estimates so far to it: each was scaled by its depth plus the thickness assumed, and, in a turned
+        wall, stretched to the wall's plane by a factor that depends on the thickness (:func:`turned_wall_stretch`).
+        The trail the vehicle steers by goes with the latest estimate's factor."""
+        old = self.servo.wall_thickness_m
+        need = self.servo.body_radius_m + self.servo.clearance_margin_m
+
+        def factor(at: tuple[float, float | None]) -> float:
+            depth, turn = at
+            f = (depth + thickness_m) / (depth + old)
+            if turn is not None and abs(turn) > TURN_NEGLIGIBLE_RAD:
+                f *= (turned_wall_stretch(need, depth, turn, thickness_m)
+                      / turned_wall_stretch(need, depth, turn, old))
+            return f
+
+        for values, ats in ((self.radii, self.radii_at), (self.close_radii, self.close_at),
+                            (self.near_radii, self.near_at)):
+            values[:] = [r * factor(at) for r, at in zip(values, ats, strict=True)]
+        if self.radii_at:
+            latest = factor(self.radii_at[-1])
+            self.radius_trail = [r * latest for r in self.radius_trail]
+        self.servo = dataclasses.replace(self.servo, wall_thickness_m=thickness_m)
 
     def _shrunk(self, steered_m: float | None) -> bool:
         """Whether every size estimate from within ``decide_within_m`` is under ``near_size_ratio`` of

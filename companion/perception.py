@@ -23,6 +23,17 @@ class Perception:
     textured: np.ndarray  # H×W bool: the first frame's pixels whose flow says something of their depth
 
 
+def derotated_flow(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: np.ndarray, flow_backend,
+                   derotate_flow: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(flow less the camera's rotation between the frames, that rotation's flow) from ``prev_rgb`` to ``rgb``, given
+    the (roll, pitch, yaw) estimates at the two frames."""
+    flow = flow_backend.estimate(prev_rgb, rgb)
+    h, w = flow.shape[:2]
+    rotational = (rotational_flow(K, body_to_world_from_euler(*prev_attitude), body_to_world_from_euler(*attitude),
+                                  h, w) if derotate_flow else np.zeros((h, w, 2), np.float32))
+    return flow - rotational, rotational
+
+
 def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: np.ndarray, flow_backend,
              detector, derotate_flow: bool = True, baseline_m: float | None = None,
              min_baseline_m: float = 0.0, edges: EdgeConfig | None = None) -> Perception:
@@ -33,11 +44,7 @@ def perceive(prev_rgb: np.ndarray, rgb: np.ndarray, prev_attitude, attitude, K: 
     pixels too (:func:`companion.gap.textured_pixels`).  ``edges``: read each opening's edge again from the two frames
     (:mod:`companion.edges`); None leaves the detector's masks as they are."""
     t0 = time.perf_counter()
-    flow = flow_backend.estimate(prev_rgb, rgb)
-    h, w = flow.shape[:2]
-    rotational = (rotational_flow(K, body_to_world_from_euler(*prev_attitude), body_to_world_from_euler(*attitude),
-                                  h, w) if derotate_flow else np.zeros((h, w, 2), np.float32))
-    flow = flow - rotational
+    flow, rotational = derotated_flow(prev_rgb, rgb, prev_attitude, attitude, K, flow_backend, derotate_flow)
     flow_ms = (time.perf_counter() - t0) * 1000
     t0 = time.perf_counter()
     textured = textured_pixels(prev_rgb)

@@ -2,20 +2,20 @@
 
 The size the companion judges an opening by is scaled by the depth of its far edges, the wall's face plus its
 thickness, which the companion assumes (0.15 m; the hard world draws 0.10-0.25 m): near the need, that assumption
-decides most refusals of passable openings (docs/evaluation.md).  This measures a look that would read it instead
-(not flown):
+decides most refusals of passable openings (docs/evaluation.md).  This measures, on renders, the look the companion
+flies to read it (:mod:`companion.thickness`; in flight the views' places and tilt add their own errors):
 
 - each scene is a hard-world draw with one opening kept and scaled near the fit threshold, as
   ``python -m tools.size_error`` draws them;
 - the camera faces the wall squarely on the normal through the opening's clear centre, ``--distance`` from the face,
   and takes two views ``--step`` apart across it (A and B); at each, a forward pair of 0.15 m gives the opening's
   mask (the flow backend, the parallax detector and, as flown, the edges read again from the frames);
-- the flow from A to B gives the face's shift beside the opening (the median in a ring 5-20 px outside A's mask); the
-  masks' centroids give the opening's; :func:`companion.opening_geometry.thickness_from_sidestep` turns the two into
-  a thickness.  The same with the rendered truth's masks shows what the geometry alone allows.
+- the flow from A to B gives the face's shift beside the opening, the masks' centroids the opening's, and
+  :func:`companion.thickness.thickness_reading` the thickness, as the flown look reads it (the opening nearest the
+  image's centre; a view whose opening reaches the frame's edge, or whose width changes by more than 5 % between A
+  and B, is left out).  The same with the rendered truth's masks shows what the geometry alone allows.
 
-A view whose opening reaches the frame's edge, or whose width changes by more than 5 % between A and B (an
-opening cut off by the frame), is left out.  Outputs (in ``-o/--out``): ``thickness_look.json`` (one row per scene
+Outputs (in ``-o/--out``): ``thickness_look.json`` (one row per scene
 and a summary) and ``thickness_look.md``.
 
     python -m tools.thickness_look --scenes 40 --seed 7000 -o runs/thickness_look
@@ -27,6 +27,7 @@ import argparse
 import functools
 import json
 import logging
+import math
 import sys
 from pathlib import Path
 
@@ -34,45 +35,7 @@ import numpy as np
 
 log = logging.getLogger("flowgap.thickness_look")
 
-RING_PX = (5, 20)          # the face's shift is read this far outside the opening's mask
-FORWARD_STEP_M = 0.15      # each view's pair, toward the wall
-CLIPPED_WIDTH_CHANGE = 0.05   # the same opening seen from within its width: its width does not change
-
-
-def mask_centroid_x(mask: np.ndarray | None, width: int) -> tuple[float, float] | None:
-    """(centroid column, width in px) of a mask, None without one or where it reaches the frame's left or right
-    edge (cut off: its centroid is not the opening's)."""
-    if mask is None or not mask.any():
-        return None
-    xs = np.nonzero(mask)[1]
-    if xs.min() < 2 or xs.max() > width - 3:
-        return None
-    return float(xs.mean()), float(xs.max() - xs.min() + 1)
-
-
-def face_shift(flow: np.ndarray, mask: np.ndarray) -> float | None:
-    """The horizontal flow's median in the ring ``RING_PX`` outside ``mask``: how far the wall's face beside the
-    opening moved."""
-    import cv2
-
-    m = mask.astype(np.uint8)
-    outer = cv2.dilate(m, np.ones((2 * RING_PX[1] + 1,) * 2, np.uint8)).astype(bool)
-    inner = cv2.dilate(m, np.ones((2 * RING_PX[0] + 1,) * 2, np.uint8)).astype(bool)
-    ring = outer & ~inner
-    return float(np.median(flow[..., 0][ring])) if ring.sum() >= 50 else None
-
-
-def sidestep_thickness(a: tuple[float, float] | None, b: tuple[float, float] | None, wall_shift_px: float | None,
-                       distance_m: float) -> float | None:
-    """The thickness from the two views' (centroid, width) and the face's shift; None where a view is missing or cut
-    off by the frame."""
-    from companion.opening_geometry import thickness_from_sidestep
-
-    if a is None or b is None or wall_shift_px is None:
-        return None
-    if abs(a[1] - b[1]) > CLIPPED_WIDTH_CHANGE * max(a[1], b[1]):
-        return None
-    return thickness_from_sidestep(b[0] - a[0], wall_shift_px, distance_m)
+FORWARD_STEP_M = 0.15      # each view's pair, toward the wall (the flown look's ThicknessLookConfig.forward_m)
 
 
 def square_pose(spec, centre_yz: tuple[float, float], distance_m: float, right_m: float):
@@ -89,6 +52,7 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> dict | None:
     from companion.gap import CameraMotion, ParallaxGapConfig, detect_gap_parallax
     from companion.perception import perceive
     from companion.servo import ServoConfig
+    from companion.thickness import ThicknessLookConfig, opening_at_centre, thickness_reading
     from scenes import load_scene, render_splats
     from scenes.library import random_scene
     from scenes.spec import SpecError
@@ -111,6 +75,8 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> dict | None:
     focal = float(camera.K[0, 0])
     detector = functools.partial(detect_gap_parallax, config=ParallaxGapConfig(), motion=CameraMotion(focal_px=focal))
     distance = float(rng.uniform(*args.distance))
+    # what the flown look judges by, less its bound on a plausible depth: the spread of the readings is measured
+    look = ThicknessLookConfig(plausible_m=(-math.inf, math.inf))
     level = (0.0, 0.0, 0.0)
     views, truths, firsts = [], [], []
     for right in (-args.step / 2.0, args.step / 2.0):
@@ -118,19 +84,16 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> dict | None:
         pose1 = square_pose(spec, centre, distance - FORWARD_STEP_M, right)
         first, second = render_splats(cloud, camera, pose0), render_splats(cloud, camera, pose1)
         seen = perceive(first.rgb, second.rgb, level, level, camera.K, backend, detector, edges=edges_for(args.edges))
-        found = [c for c in (seen.detection.candidates or (seen.detection,)) if c.found]
-        mask = max(found, key=lambda c: c.clear_radius_px).mask if found else None
-        views.append(mask)
+        views.append(opening_at_centre(seen.detection))
         truths.append(gt_mask(cloud, camera, pose0, first))
         firsts.append(first.rgb)
     flow = backend.estimate(firsts[0], firsts[1])
     row = {"scene": index, "distance_m": distance, "thickness_m": spec.wall.thickness, "turn_deg": spec.start_yaw_deg,
            "shape": spec.openings[0].shape}
     for label, (mask_a, mask_b) in (("detected", views), ("truth", truths)):
-        a, b = mask_centroid_x(mask_a, camera.width), mask_centroid_x(mask_b, camera.width)
-        wall = face_shift(flow, mask_a) if mask_a is not None and mask_a.any() else None
-        row[f"{label}_wall_shift_px"] = wall
-        row[f"{label}_thickness_m"] = sidestep_thickness(a, b, wall, distance)
+        reading = thickness_reading(mask_a, mask_b, flow, distance, look)
+        row[f"{label}_wall_shift_px"] = reading.wall_shift_px
+        row[f"{label}_thickness_m"] = reading.thickness_m
     return row
 
 

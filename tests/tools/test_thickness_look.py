@@ -1,11 +1,11 @@
 """tools.thickness_look and companion.opening_geometry.thickness_from_sidestep: the wall's thickness from a step
-sideways square to it, the opening (bounded by its far edges) shifting as a thing t further away than the face."""
+sideways square to it, the opening (bounded by its far edges) shifting as a thing t further away than the face
+(the flown look's own reading: tests/companion/test_thickness.py)."""
 
 from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
 
 from companion.opening_geometry import thickness_from_sidestep
@@ -26,30 +26,6 @@ def test_shifts_no_depth_explains_give_no_thickness():
     assert thickness_from_sidestep(-31.0, -30.0, 1.2) is None        # the opening nearer than the face
     assert thickness_from_sidestep(0.0, -30.0, 1.2) is None
     assert thickness_from_sidestep(-30.0, -30.0, 1.2) == 0.0
-
-
-def test_an_opening_cut_off_by_the_frame_or_changing_width_is_left_out():
-    mask = np.zeros((240, 320), bool)
-    mask[100:140, 150:190] = True
-    assert thickness_look.mask_centroid_x(mask, 320) == (pytest.approx(169.5), 40.0)
-    edge = mask.copy()
-    edge[100:140, 0:10] = True
-    assert thickness_look.mask_centroid_x(edge, 320) is None
-    assert thickness_look.mask_centroid_x(np.zeros((240, 320), bool), 320) is None
-    wall = -FOCAL * 0.3 / 1.2
-    a, b = (170.0, 40.0), (170.0 + wall * 1.2 / 1.35, 40.0)
-    assert thickness_look.sidestep_thickness(a, b, wall, 1.2) == pytest.approx(0.15)
-    assert thickness_look.sidestep_thickness(a, (b[0], 43.0), wall, 1.2) is None     # 7 % wider
-    assert thickness_look.sidestep_thickness(a, None, wall, 1.2) is None
-
-
-def test_the_face_shift_is_read_in_a_ring_outside_the_mask():
-    mask = np.zeros((240, 320), bool)
-    mask[100:140, 150:190] = True
-    flow = np.zeros((240, 320, 2), np.float32)
-    flow[..., 0] = -30.0
-    flow[mask] = -5.0                                              # what shows through the opening moves less
-    assert thickness_look.face_shift(flow, mask) == pytest.approx(-30.0)
 
 
 def test_a_run_reads_the_thickness_with_the_rendered_truth(tmp_path):

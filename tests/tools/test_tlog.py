@@ -569,6 +569,34 @@ def test_replay_uses_the_detector_each_frame_was_flown_with(tmp_path, monkeypatc
     assert result["steps"] == 3 and used == ["plain", "plain", "blind"]
 
 
+def test_replay_pairs_no_frame_with_a_looks_first_frame(tmp_path, monkeypatch):
+    """A frame without a decision line is a look's first frame (a search's, or the servo's again after the thickness
+    look): the pair ending on it is not replayed, the next pair starts from it."""
+    import companion.perception as perception
+    from tools.tlog.replay import replay
+
+    pairs = []
+    real = perception.perceive
+
+    def perceive(prev, rgb, *args, **kwargs):
+        pairs.append((float(prev.mean()), float(rgb.mean())))
+        return real(prev, rgb, *args, **kwargs)
+
+    monkeypatch.setattr(perception, "perceive", perceive)
+    (tmp_path / "summary.json").write_text(json.dumps({"scene": "window1_brick", "flow": "dis:fast",
+                                                       "detector": "parallax"}))
+    level = [1.0, 0.0, 0.0, 0.0]
+    frames = [{"step": n, "time_s": float(n), "position_true": [0.2 * n, 0.1 * (n == 3), -1.5],
+               "attitude_true": level, "position_est": [0.2 * n, 0.0, -1.5], "attitude_est": [0.0, 0.0, 0.0]}
+              for n in range(5)]
+    (tmp_path / "frames.jsonl").write_text("".join(json.dumps(f) + "\n" for f in frames))
+    decisions = [{"step": n, "centroid_used": None} for n in (1, 2, 4)]
+    (tmp_path / "decisions.jsonl").write_text("".join(json.dumps(d) + "\n" for d in decisions))
+    result = replay(tmp_path)
+    assert result["steps"] == 3 and [r["step"] for r in result["rows"]] == [1, 2, 4]
+    assert len(pairs) == 3 and pairs[1][1] != pairs[2][0]      # step 3's frame opens the last pair, not step 2's
+
+
 def test_replay_reads_the_edges_as_flown_unless_told_otherwise(tmp_path, monkeypatch):
     """``--edges``: the flight's edge reading by default (the detector's masks for a run from before the option),
     the one asked for otherwise; the result and its summary say which."""

@@ -83,6 +83,10 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
     rows, prev = [], render(0)
     for step in sorted(s for s in frames if s > 0):
         rgb = render(step)
+        if step not in decisions:
+            # a look's first frame (a search's, or the servo's again after the thickness look): no pair ends on it
+            prev = rgb
+            continue
         before, now = frames[step - 1].get("position_est"), frames[step].get("position_est")
         moved = math.dist(before, now) if before is not None and now is not None else None
         blind = decisions.get(step, {}).get("past_the_end", False)
