@@ -293,10 +293,10 @@ class Mission(ThicknessLook):
 
             # a refusal's own frame is logged too, holding: the estimate that decided it is in the decision log
             hold = ServoStep((0.0, 0.0, 0.0), None, False, False)
+            lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))
             if self._thickness_due(sight, view):
                 # judged too near the need to tell by the depth assumed: read the wall's, judge again by it, and go
                 # on from here with the step this frame gives (no push on it: the next frame decides)
-                lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))
                 resume = dataclasses.replace(next_look_step(view, k, width, height, cfg, wall_prior,
                                                             openings.last_accepted, lag), push=False)
                 observed["note"] = "; ".join(filter(None, [observed["note"], "the wall's thickness read next"]))
@@ -328,7 +328,6 @@ class Mission(ThicknessLook):
                 why = f"no opening in sight with the wall {wall_ahead_words(ahead, view.ahead_basis)}: not flying on"
                 self._record_step(frame, seen.flow, detection, shown, hold, wall_distance, observed, why)
                 raise Refusal(why, None, openings.alternative())
-            lag = tuple(w - q for w, q in zip(self._across(waypoint), self._across(position), strict=True))
             next_step = next_look_step(view, k, width, height, cfg, wall_prior, openings.last_accepted, lag)
             near = wall_distance is not None and wall_distance <= self.openings.decide_within_m
             unseen_in_front = unseen_in_front + 1 if near and not found and sight.offset_m is not None else 0

@@ -17,19 +17,24 @@ from companion.thickness import combined_reading, opening_at_centre, plan_look, 
 log = logging.getLogger("companion.mission")
 
 
+def deciding_radius(sight) -> float | None:
+    """The clear radius a tracked opening's fit turns on: the one judged, or, before that, the one it would be
+    pushed by (an opening that fits is pushed on one estimate from in front of it, ServoConfig.judged_tight)."""
+    return sight.judged_m if sight.judged_m is not None else sight.clear_radius_m
+
+
 class ThicknessLook:
     def _thickness_due(self, sight, view) -> bool:
         """Whether to look at the wall's thickness now: not yet this flight, the tracked opening seen from in front
-        of it (the wall's distance known, and its turn within the look's bound) with a clear radius within
-        ``band_m`` of the need: the one judged, or, before that, the one it would be pushed by (an opening that
-        fits is pushed on one such estimate, ServoConfig.judged_tight)."""
+        of it (the wall's distance known, and its turn within the look's bound), its deciding radius within
+        ``band_m`` of the need."""
         c = self.thickness
         if (not c.enabled or self._thickness_looked or sight.judged_estimates < 1 or sight.offset_m is None
                 or view.wall_distance is None):
             return False
         if view.wall_yaw is not None and abs(view.wall_yaw) > c.max_turn_rad:
             return False
-        radius = sight.judged_m if sight.judged_m is not None else sight.clear_radius_m
+        radius = deciding_radius(sight)
         return radius is not None and abs(judged_tolerance(radius, self.servo)) <= c.band_m
 
     def _thickness_look(self, sight, view, position, openings: OpeningTracker) -> float | None:
@@ -44,7 +49,7 @@ class ThicknessLook:
         floor = self._home_z - min(self.config.min_altitude_m, self.config.altitude_m)
         centre = self._from_heading(face, right, min(down, floor))
         plan = plan_look(centre, self.yaw - turn, c)
-        radius = sight.judged_m if sight.judged_m is not None else sight.clear_radius_m
+        radius = deciding_radius(sight)
         self._say(f"the opening judged {2 * radius:.3f} m clear, within {2 * c.band_m:.2f} m of the need: reading the "
                   f"wall's thickness square to it (turned {math.degrees(turn):.1f}°) from {plan.distance_m:.2f} m")
         side_a = [self._look_frame(point, plan.yaw) for point in plan.a]
@@ -52,7 +57,6 @@ class ThicknessLook:
         readings = [self._look_reading(side_a[k:k + 2], side_b[k:k + 2], centre, plan.yaw) for k in range(c.readings)]
         reading = combined_reading(readings, c)
         frames = side_a + side_b
-        distance = plan.distance_m
         judged = None
         if reading.thickness_m is None:
             self._say(f"the wall's thickness not read ({reading.why}): judged as assumed")
@@ -66,7 +70,7 @@ class ThicknessLook:
         self.result.wall_thickness_m = reading.thickness_m
         # with the frames' own poses (the simulator's truth, for the logs only), to tell the look's errors apart
         self.result.thickness_look = {
-            "why": reading.why, "readings": [r.thickness_m for r in readings], "distance_m": distance,
+            "why": reading.why, "readings": [r.thickness_m for r in readings], "distance_m": plan.distance_m,
             "turn_rad": turn, "centre": list(centre), "yaw": plan.yaw,
             "aperture_shift_px": [r.aperture_shift_px for r in readings],
             "wall_shift_px": [r.wall_shift_px for r in readings],
@@ -113,9 +117,7 @@ class ThicknessLook:
     def _back_from_the_look(self, waypoint, first_step: int):
         """Back to the servo's ``waypoint``, facing the heading again; its first frame (numbered ``first_step`` in
         the logs) and the estimates at it, for the next pair."""
-        self._send(waypoint)
-        self.link.wait_position(waypoint, self.config.arrival_tolerance_m, self.config.search_move_timeout_s,
-                                self.config.arrival_speed_mps)
+        self._move_to(waypoint)
         self._settle()
         frame = self.camera.capture()
         position, attitude = self._estimates_at(frame.time_s)

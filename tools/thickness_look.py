@@ -35,7 +35,6 @@ import numpy as np
 
 log = logging.getLogger("flowgap.thickness_look")
 
-FORWARD_STEP_M = 0.15      # each view's pair, toward the wall (the flown look's ThicknessLookConfig.forward_m)
 
 
 def square_pose(spec, centre_yz: tuple[float, float], distance_m: float, right_m: float):
@@ -81,7 +80,7 @@ def measure_scene(index: int, seed: int, args, backend, camera) -> dict | None:
     views, truths, firsts = [], [], []
     for right in (-args.step / 2.0, args.step / 2.0):
         pose0 = square_pose(spec, centre, distance, right)
-        pose1 = square_pose(spec, centre, distance - FORWARD_STEP_M, right)
+        pose1 = square_pose(spec, centre, distance - look.forward_m, right)
         first, second = render_splats(cloud, camera, pose0), render_splats(cloud, camera, pose1)
         seen = perceive(first.rgb, second.rgb, level, level, camera.K, backend, detector, edges=edges_for(args.edges))
         views.append(opening_at_centre(seen.detection))
