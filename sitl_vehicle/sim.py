@@ -349,14 +349,15 @@ class VehicleSim:
         pos = sp.position
         pmask = (_fin(pos[0]), _fin(pos[1]), _fin(pos[2]))
         if any(pmask):
-            self._plan_at_speed(sp.cruise_speed)
+            speed_changed = self._plan_at_speed(sp.cruise_speed)
             if not self.planner.active or fresh:
                 vr = self.slew.v_ref
                 v_now = tuple(vr[i] if _fin(vr[i]) else est.velocity[i] for i in range(3))
                 self.planner.clear()
                 self.planner.set_target(pos, self.time_s, est.position, v_now)
-            else:
-                self.planner.set_target(pos, self.time_s, est.position, est.velocity)
+            elif not self.planner.set_target(pos, self.time_s, est.position, est.velocity) and speed_changed:
+                # as PX4 does, a new cruise speed (DO_CHANGE_SPEED) applies to the move under way
+                self.planner.replan(self.time_s, est.position, est.velocity)
             if all(pmask):
                 self.slew.reset()
         else:
@@ -368,14 +369,16 @@ class VehicleSim:
         if _fin(sp.yaw):
             self._yaw_sp = sp.yaw
 
-    def _plan_at_speed(self, cruise_speed: float) -> None:
-        """The planner's limits for the next move: the configured ones, with a setpoint's cruise speed (capped at
-        the horizontal velocity limit) in place of MPC_XY_CRUISE.  A move already planned keeps its speed."""
+    def _plan_at_speed(self, cruise_speed: float) -> bool:
+        """The planner's limits: the configured ones, with a setpoint's cruise speed (capped at the horizontal
+        velocity limit) in place of MPC_XY_CRUISE. Returns whether they changed."""
         limits = self.config.planner
         if _fin(cruise_speed):
             limits = _replace(limits, v_max_xy=min(cruise_speed, self.config.control.vel_max_xy))
-        if self.planner.config != limits:
-            self.planner.set_config(limits)
+        if self.planner.config == limits:
+            return False
+        self.planner.set_config(limits)
+        return True
 
     # ------------------------------------------------------------------ stepping
     def run(self, duration_s: float) -> None:

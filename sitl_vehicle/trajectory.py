@@ -150,7 +150,8 @@ class TrapezoidPlanner:
         self._target = None
 
     def set_config(self, config: PlannerConfig) -> None:
-        """New limits apply to the next (re)plan; the current move continues unchanged."""
+        """New limits apply to the next (re)plan (:meth:`replan` for the move under way); the current move
+        continues unchanged."""
         self.config = config
 
     def is_same_target(self, target) -> bool:
@@ -172,6 +173,18 @@ class TrapezoidPlanner:
         target = tuple(float(c) for c in target)
         if self.is_same_target(target):
             return False
+        self._plan_to(target, t, p_now, v_now)
+        return True
+
+    def replan(self, t: float, p_now=None, v_now=None) -> bool:
+        """Plan the current target again from the reference at time ``t`` (s), under the limits set now: how a new
+        cruise speed applies to the move under way. Returns False (and changes nothing) when idle."""
+        if self._target is None:
+            return False
+        self._plan_to(self._target, t, p_now, v_now)
+        return True
+
+    def _plan_to(self, target: tuple[float, float, float], t: float, p_now, v_now) -> None:
         if self._target is not None:
             p0, v0, _ = self.sample(t)
             # axes not planned before continue from the state
@@ -191,7 +204,6 @@ class TrapezoidPlanner:
         self._target = target
         self._mask = mask
         self.restarts += 1
-        return True
 
     def _plan(self, goal, t: float, p0, v0) -> None:
         c = self.config

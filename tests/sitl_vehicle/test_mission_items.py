@@ -163,6 +163,18 @@ def test_the_vehicle_cruises_at_a_setpoints_speed_capped_at_mpc_xy_vel_max():
     assert top_speed(Setpoint(position=far, cruise_speed=5.0), capped) == pytest.approx(1.2, rel=0.05)
 
 
+def test_a_new_cruise_speed_applies_to_the_move_under_way_as_px4s_do_change_speed_does():
+    from tests.sitl_vehicle.test_sim import _stream
+
+    sim = VehicleSim(VehicleConfig(noise=None), initial_position=(0.0, 0.0, -2.0))
+    sim.set_armed(True)
+    far = (30.0, 0.0, -2.0)
+    _stream(sim, Setpoint(position=far), 4.0)                           # cruising at MPC_XY_CRUISE
+    assert sim.truth.velocity[0] == pytest.approx(VehicleConfig().planner.v_max_xy, rel=0.05)
+    flown = _stream(sim, Setpoint(position=far, cruise_speed=0.7), 4.0)  # the same target, slower
+    assert np.hypot(flown[-40:, 3], flown[-40:, 4]) == pytest.approx(0.7, rel=0.05)
+
+
 def test_payload_items_last_hold_at_the_waypoint_before_them_as_mavsdk_missions_end():
     c = flying([local_item(0, NAV_WAYPOINT, 2.0, 0.0),
                 command_item(1, mavlink.MAV_CMD_IMAGE_START_CAPTURE, (0.0, 0.0, 1.0, 0.0)),

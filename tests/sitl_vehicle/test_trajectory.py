@@ -288,6 +288,20 @@ def test_set_config_applies_to_the_next_plan_only():
     assert pl.sample(d0 + 2.0)[1][0] == pytest.approx(-1.0)
 
 
+def test_replan_takes_the_move_under_way_to_new_limits_without_a_jump():
+    pl = TrapezoidPlanner(CFG)
+    assert not pl.replan(0.0)                                           # idle: nothing to plan again
+    pl.set_target((20.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.0))
+    p1, v1, _ = pl.sample(3.0)
+    assert v1[0] == pytest.approx(2.0)                                  # cruising at MPC_XY_CRUISE
+    pl.set_config(PlannerConfig(v_max_xy=0.5, a_max_xy=3.0))
+    assert pl.replan(3.0) and pl.target == (20.0, 0.0, 0.0) and pl.restarts == 2
+    p2, v2, _ = pl.sample(3.0)
+    assert p2 == pytest.approx(p1) and v2 == pytest.approx(v1)         # the reference continues from where it was
+    assert pl.sample(3.0 + 1.5 / 3.0)[1][0] == pytest.approx(0.5)      # braked to the new speed at a_max
+    assert pl.sample(3.0 + pl.duration)[0] == pytest.approx((20.0, 0.0, 0.0))
+
+
 def test_the_retarget_tolerance_is_per_axis_and_nan_aware():
     pl = TrapezoidPlanner(PlannerConfig(retarget_tolerance_m=0.5))
     pl.set_target((1.0, 2.0, -1.0), 0.0, (0.0, 0.0, 0.0))
