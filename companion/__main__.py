@@ -200,7 +200,8 @@ def main(argv: list[str] | None = None) -> int:
         clock.close()       # in lockstep: the vehicle's last second, to settle before its verdict
         camera.close()
     summary = {"scene": args.scene, "flow": args.flow, "detector": args.detector, "edges": args.edges,
-               "link": args.link, "clock": clock.name, "latency_s": args.latency, **result.as_dict()}
+               "thickness_look_on": not args.no_thickness_look, "link": args.link, "clock": clock.name,
+               "latency_s": args.latency, **result.as_dict()}
     runlog.summary(summary)
     push = f", pushed {result.push_length_m:.2f} m" if result.push_length_m else ""
     board = runlog.storyboard(mission.record.storyboard.render(

@@ -309,6 +309,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--edges", default="photo", choices=EDGE_MODES,
                    help="how the companion reads an opening's edge: photo (default), decided again from the two "
                         "frames; flow, the detector's mask as the flow shows it (before 2026-12-06)")
+    p.add_argument("--no-thickness-look", action="store_true",
+                   help="fly the companion without the thickness look (flowgap-companion --no-thickness-look): "
+                        "openings judged by the wall's assumed 0.15 m depth throughout, for A/B sweeps")
     p.add_argument("-o", "--out", type=Path, default=Path("runs/eval_flights"),
                    help="output directory (default %(default)s)")
     p.add_argument("--resume", action="store_true",
@@ -377,7 +380,9 @@ def sweep_settings(args, link_faults: LinkFaults | None) -> dict:
             "clock": "realtime" if args.realtime else "lockstep", "speed": args.speed if args.realtime else None,
             "latency_s": args.latency, "link_faults": None if link_faults is None else link_faults.settings(),
             # absent from sweeps flown before the photometric edges: theirs were the flow's, and resume so
-            **({} if args.edges == "flow" else {"edges": args.edges})}
+            **({} if args.edges == "flow" else {"edges": args.edges}),
+            # absent from sweeps flown with the look, before it could be turned off here
+            **({"thickness_look": False} if args.no_thickness_look else {})}
 
 
 def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None) -> int:
@@ -401,7 +406,8 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
     # this machine's share for each of --jobs flights (--ray local runs on it too); a cluster task's, its CPUs
     threads = flight_threads(args.jobs) if args.ray in (None, "local") else max(1, int(args.cpus_per_flight))
     settings = FlightSettings(flow=args.flow, detector=args.detector, edges=args.edges, lockstep=not args.realtime,
-                              speed=args.speed, latency_s=args.latency, threads=threads)
+                              speed=args.speed, latency_s=args.latency, threads=threads,
+                              thickness_look=not args.no_thickness_look)
 
     def make_row(job: FlightJob, verdict: dict) -> dict:
         row = {**verdict, "scene": job.label, "start_index": job.start_index, "seed": job.flight["seed"]}
@@ -441,7 +447,7 @@ def _sweep(args, scenes: list[str], specs: dict, link_faults: LinkFaults | None)
     rows = sorted((judge(r, passable[r["scene"]]) for r in outcome.rows), key=lambda r: (r["scene"], r["start_index"]))
     summary = summarise(rows)
     summary.update(world=args.world, flow=args.flow, detector=args.detector, edges=args.edges,
-                   clock="realtime" if args.realtime else "lockstep",
+                   thickness_look=not args.no_thickness_look, clock="realtime" if args.realtime else "lockstep",
                    speed=args.speed if args.realtime else None, latency_s=args.latency, seed=args.seed,
                    starts_per_scene=args.starts, threads_per_flight=threads,
                    # every run of the sweep (a resumed one's earlier runs too), and this one

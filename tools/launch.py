@@ -140,7 +140,7 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
            wind: tuple[float, ...] | None = None, yaw_deg: float | None = None,
            camera_delay_s: float = 0.0, rerun: bool = False, rerun_connect: str | None = None,
            link_faults: LinkFaults | None = None, signing_key: Path | None = None, edges: str = "photo",
-           threads: int | None = None) -> dict:
+           threads: int | None = None, thickness_look: bool = True) -> dict:
     """Fly one two-process SITL flight; returns the verdict dict (also written to run_dir/verdict.json).
 
     ``scene``: a suite name, spec ``.json`` or capture scene ``.json``; ``start`` (NED, on the ground), ``yaw_deg``
@@ -153,7 +153,8 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
     ``run_dir/flight.rrd`` (``rerun_connect``: streams it to a running viewer instead); ``link_faults``: relay
     the API link through seeded faults (a seed of None: ``seed``'s), recorded in the verdict's ``link_faults``;
     ``signing_key``: a PX4 key file both processes sign with (the vehicle then drops unsigned messages);
-    ``threads``: the threads each library of both processes may use (:func:`thread_env`; None: as many as cores).
+    ``threads``: the threads each library of both processes may use (:func:`thread_env`; None: as many as cores);
+    ``thickness_look``: False flies the companion with ``--no-thickness-look`` (the wall's assumed depth throughout).
     ``timeout_s``: in real time, the wall seconds after which the flight is stopped; in lockstep, the simulated
     seconds after which the vehicle stops itself, so that the outcome never depends on the machine's load (a
     wall limit once cut hard-world flights short on a busy machine), and ``LOCKSTEP_HANG_S`` wall seconds bound
@@ -191,6 +192,8 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
                      "--link", link, "--latency", f"{latency_s:g}", "--camera-delay", f"{camera_delay_s:g}"]
     if not images:
         companion_cmd.append("--no-images")
+    if not thickness_look:
+        companion_cmd.append("--no-thickness-look")
     if lockstep:
         companion_cmd.append("--lockstep")
     if rerun_connect:
@@ -261,6 +264,7 @@ def launch(scene: str, run_dir: Path, start=None, speed: float = 1.0, instance: 
         "flow": flow,
         "detector": detector,
         "edges": edges,
+        "thickness_look": thickness_look,
         "clock": "lockstep" if lockstep else "realtime",
         "latency_s": latency_s,
         "wind": vehicle_verdict.get("wind"),
@@ -340,6 +344,9 @@ def _main(argv: list[str] | None) -> int:
     p.add_argument("--edges", default="photo", choices=EDGE_MODES,
                    help="how the companion reads an opening's edge: photo (default), decided again from the two "
                         "frames; flow, the detector's mask as the flow shows it (before 2026-12-06)")
+    p.add_argument("--no-thickness-look", action="store_true",
+                   help="the companion never looks at the wall's depth near the need; it judges openings by the "
+                        "assumed 0.15 m throughout (flowgap-companion --no-thickness-look)")
     p.add_argument("--link", default="pymavlink", choices=["pymavlink", "mavsdk"], help="companion link backend")
     p.add_argument("--seed", type=int, default=0, help="vehicle sensor-noise (and wind) seed")
     p.add_argument("--wind", type=_wind, default=None, metavar="MEAN,GUST[,FROM_DEG]",
@@ -419,7 +426,7 @@ def _main(argv: list[str] | None) -> int:
                      link=args.link, lockstep=args.lockstep, latency_s=args.latency, wind=args.wind,
                      yaw_deg=args.yaw, camera_delay_s=args.camera_delay, rerun=args.rerun,
                      rerun_connect=args.rerun_connect, link_faults=link_faults, signing_key=args.signing_key,
-                     edges=args.edges)
+                     edges=args.edges, thickness_look=not args.no_thickness_look)
     if args.result:
         args.result.parent.mkdir(parents=True, exist_ok=True)
         args.result.write_text(json.dumps(verdict, indent=2) + "\n")

@@ -49,6 +49,7 @@ class FlightSettings:
     flow: str = DEFAULT_FLOW
     detector: str = "parallax"
     edges: str = "photo"        # flowgap-companion --edges
+    thickness_look: bool = True  # False: flowgap-companion --no-thickness-look
     lockstep: bool = True
     speed: float = 2.0          # with lockstep False only
     latency_s: float = 0.0
@@ -85,7 +86,8 @@ def fly(job: FlightJob, settings: FlightSettings, scene: str, run_dir: Path, ins
                          settings.detector, seed=job.flight["seed"], images=False, log_sink=None,
                          altitude=job.flight["altitude"], lockstep=settings.lockstep, latency_s=settings.latency_s,
                          wind=job.flight["wind"], camera_delay_s=job.flight["camera_delay_s"],
-                         link_faults=job.link_faults, edges=settings.edges, threads=settings.threads)
+                         link_faults=job.link_faults, edges=settings.edges, threads=settings.threads,
+                         thickness_look=settings.thickness_look)
     finally:
         ended = time.time()
         instances.release(instance)

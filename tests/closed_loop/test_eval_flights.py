@@ -109,3 +109,13 @@ def test_a_capture_is_flown_from_its_own_start_and_judged_by_its_gate():
     beside = {"crossed_wall": True, "collision": False, "gate": {"crossed": False}}
     through = {"crossed_wall": True, "collision": False, "gate": {"crossed": True}}
     assert not judge(beside, True)["success"] and judge(through, True)["success"]
+
+
+def test_a_sweep_without_the_thickness_look_resumes_only_such_a_sweep():
+    """``--no-thickness-look`` is part of what a resumed flight must share; a sweep flown with the look (whose saved
+    settings predate the option) resumes as it did."""
+    from tools.eval_flights import _parser, sweep_settings
+
+    with_look = sweep_settings(_parser().parse_args(["--world", "hard"]), None)
+    without = sweep_settings(_parser().parse_args(["--world", "hard", "--no-thickness-look"]), None)
+    assert "thickness_look" not in with_look and without == {**with_look, "thickness_look": False}

@@ -123,3 +123,23 @@ def test_a_companion_that_dies_at_once_is_a_failure_whatever_an_earlier_flight_l
     assert verdict["error"].startswith("the companion exited (code 2) without a summary: ")
     assert "nosuchflow" in verdict["error"] and "\n" not in verdict["error"]
     assert json.loads((run_dir / "verdict.json").read_text()) == verdict
+
+
+def test_launch_hands_no_thickness_look_to_the_companion_and_records_it(tmp_path, monkeypatch):
+    """``flowgap-sitl --no-thickness-look`` / ``flowgap-eval-flights --no-thickness-look`` reach the companion's
+    command line, and the verdict says how the flight was flown."""
+    import tools.launch
+    from tools.launch import launch
+
+    commands = []
+
+    def start(cmd, *args):
+        commands.append(cmd)
+        raise KeyboardInterrupt         # stop before anything runs: only the command is looked at
+
+    monkeypatch.setattr(tools.launch, "_start", start)
+    for look in (True, False):
+        verdict = launch("window1_brick", tmp_path / str(look), images=False, log_sink=None, lockstep=True,
+                         thickness_look=look)
+        assert verdict["thickness_look"] is look and verdict["success"] is False
+        assert ("--no-thickness-look" in commands[-1]) is not look and "companion" in commands[-1]
