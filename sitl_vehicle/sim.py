@@ -357,7 +357,7 @@ class VehicleSim:
                 self.planner.set_target(pos, self.time_s, est.position, v_now)
             elif not self.planner.set_target(pos, self.time_s, est.position, est.velocity) and speed_changed:
                 # as PX4 does, a new cruise speed (DO_CHANGE_SPEED) applies to the move under way
-                self.planner.replan(self.time_s, est.position, est.velocity)
+                self.planner.replan(self.time_s)
             if all(pmask):
                 self.slew.reset()
         else:

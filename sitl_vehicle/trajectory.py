@@ -176,12 +176,13 @@ class TrapezoidPlanner:
         self._plan_to(target, t, p_now, v_now)
         return True
 
-    def replan(self, t: float, p_now=None, v_now=None) -> bool:
+    def replan(self, t: float) -> bool:
         """Plan the current target again from the reference at time ``t`` (s), under the limits set now: how a new
-        cruise speed applies to the move under way. Returns False (and changes nothing) when idle."""
+        cruise speed applies to the move under way. Returns False (and changes nothing) when idle. (The same target
+        plans the same axes, so the state is not needed: unplanned axes stay out of the plan.)"""
         if self._target is None:
             return False
-        self._plan_to(self._target, t, p_now, v_now)
+        self._plan_to(self._target, t, None, None)
         return True
 
     def _plan_to(self, target: tuple[float, float, float], t: float, p_now, v_now) -> None:
