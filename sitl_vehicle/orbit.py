@@ -7,20 +7,24 @@ PX4 starts a 1 m circle round where the vehicle is at 1 m/s.  A command changes 
 acceleration would reach 2 m/s² is lowered to the one that does not (PX4 keeps the radius: a small circle flown
 slowly is the safe one).  Off the circle (more than 2 m from it, or ``NAV_MC_ALT_RAD`` from its altitude) the
 vehicle flies straight to its nearest point facing the centre; on it, it flies the tangent with a pull back to the
-radius, facing as the yaw behaviour says.  The functions are the geometry; :class:`OrbitMode` is the commander's
-part (mixed into :class:`sitl_vehicle.commander.Commander`).
+radius, facing as the yaw behaviour says.  Live sticks (MANUAL_CONTROL) change the circle as PX4's do
+(:func:`stick_adjusted`): the radius and the speed, and the throttle climbs or descends with the circle, centred
+holding its altitude.  The functions are the geometry; :class:`OrbitMode` is the commander's part (mixed into
+:class:`sitl_vehicle.commander.Commander`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from pymavlink.dialects.v20 import common as mavlink
 
 from sitl_vehicle.commander_types import ACCEPTED, Reply, VehicleStatus
+from sitl_vehicle.manual import stick_climb_velocity
 from sitl_vehicle.modes import FlightMode
 from sitl_vehicle.sim import Setpoint
+from sitl_vehicle.trajectory import PlannerConfig
 
 NAN = math.nan
 
@@ -30,6 +34,8 @@ SPEED_MAX_MPS = 10.0
 ACCELERATION_MAX_MPS2 = 2.0
 ON_CIRCLE_M = 2.0
 START_SPEED_MPS = 1.0
+STICK_STEP_MAX_S = 0.5   # the longest step the sticks act over (PX4's flight task time-out)
+PLANNER_DEFAULTS = PlannerConfig()   # MPC_XY_CRUISE and MPC_ACC_HOR where the vehicle's parameters are not bound
 
 # MAVLink ORBIT_YAW_BEHAVIOUR
 YAW_FRONT_TO_CENTER = 0
@@ -44,13 +50,17 @@ YAW_BEHAVIOURS = (YAW_FRONT_TO_CENTER, YAW_HOLD_INITIAL_HEADING, YAW_UNCONTROLLE
 @dataclass(frozen=True)
 class Orbit:
     """One circle: ``centre`` (local north, east and down, m), ``radius`` (m), ``speed`` (m/s, + clockwise),
-    ``yaw_behaviour`` (ORBIT_YAW_BEHAVIOUR) and the heading it was commanded at (for HOLD_INITIAL_HEADING)."""
+    ``yaw_behaviour`` (ORBIT_YAW_BEHAVIOUR), the heading it was commanded at (for HOLD_INITIAL_HEADING), the
+    direction it was commanded in (the sense of the sticks with the nose along the tangent: PX4 keeps it while the
+    sticks turn the circle round) and when the sticks last acted on it (s; None: not yet)."""
 
     centre: tuple[float, float, float]
     radius: float
     speed: float
     yaw_behaviour: int = YAW_FRONT_TO_CENTER
     initial_yaw: float = 0.0
+    started_clockwise: bool = True
+    sticks_at_s: float | None = field(default=None, compare=False)   # bookkeeping, not the circle
 
 
 def feasible(radius: float, speed: float, radius_max: float) -> tuple[float, float]:
@@ -89,7 +99,24 @@ def commanded_orbit(orbit: Orbit, yaw: float, radius_max: float, radius: float =
         centre_down = down
     behaviour = int(yaw_behaviour) if math.isfinite(yaw_behaviour) else orbit.yaw_behaviour
     return replace(orbit, centre=(north, east, centre_down), radius=new_radius, speed=new_speed,
-                   yaw_behaviour=behaviour, initial_yaw=yaw)
+                   yaw_behaviour=behaviour, initial_yaw=yaw, started_clockwise=clockwise)
+
+
+def stick_adjusted(orbit: Orbit, forward: float, right: float, dt: float, radius_max: float, radius_rate: float,
+                   speed_rate: float) -> Orbit:
+    """``orbit`` as PX4's sticks change it over ``dt`` s (``forward``, ``right``: the shaped pitch and roll sticks,
+    -1..1).  Facing the centre (any yaw behaviour but FRONT_TANGENT), the pitch stick forward draws the circle in at
+    ``radius_rate`` (MPC_XY_CRUISE, m/s at full stick) and the roll stick right speeds it up clockwise at
+    ``speed_rate`` (MPC_ACC_HOR, m/s² at full stick; left: counter-clockwise, through a stop).  With the nose along
+    the tangent the two swap, in the sense the circle was commanded in: roll towards the centre draws it in, pitch
+    forward speeds it along.  The result is held to :func:`feasible`."""
+    radius_stick, speed_stick = forward, right
+    if orbit.yaw_behaviour == YAW_FRONT_TANGENT:
+        sense = 1.0 if orbit.started_clockwise else -1.0
+        radius_stick, speed_stick = sense * right, sense * forward
+    radius, speed = feasible(orbit.radius - radius_stick * dt * radius_rate,
+                             orbit.speed + speed_stick * dt * speed_rate, radius_max)
+    return replace(orbit, radius=radius, speed=speed)
 
 
 def on_circle(orbit: Orbit, position: tuple[float, float, float], altitude_acceptance_m: float) -> bool:
@@ -132,7 +159,7 @@ def circle_setpoint(orbit: Orbit, position: tuple[float, float, float]) -> Setpo
         yaw, yaw_rate = math.atan2(ahead * un, -ahead * ue), v / r
     elif orbit.yaw_behaviour == YAW_FRONT_TO_CENTER:
         yaw, yaw_rate = math.atan2(-ue, -un), v / r
-    # YAW_UNCONTROLLED and YAW_RC_CONTROLLED (no sticks flown in Orbit here): the heading it has is held
+    # YAW_UNCONTROLLED and YAW_RC_CONTROLLED (the yaw stick is not flown in Orbit here): the heading it has is held
     return Setpoint(position=(NAN, NAN, down), velocity=velocity, acceleration=acceleration, yaw=yaw,
                     yaw_rate=yaw_rate)
 
@@ -167,10 +194,38 @@ class OrbitMode:
 
     def _orbit_setpoint(self, status: VehicleStatus) -> Setpoint:
         """On the circle, round it; off it, straight to its nearest point as it was when the approach began,
-        facing the centre."""
+        facing the centre.  The sticks act first; a throttle off centre climbs or descends at its speed."""
+        climb = self._orbit_sticks(status)
         if on_circle(self._orbit, status.position, self.params["NAV_MC_ALT_RAD"]):
             self._orbit_approach = None
-            return circle_setpoint(self._orbit, status.position)
-        if self._orbit_approach is None:
-            self._orbit_approach = approach_point(self._orbit, status.position)
-        return Setpoint(position=self._orbit_approach, yaw=facing_centre(self._orbit, status.position))
+            setpoint = circle_setpoint(self._orbit, status.position)
+        else:
+            if self._orbit_approach is None:
+                self._orbit_approach = approach_point(self._orbit, status.position)
+            setpoint = Setpoint(position=self._orbit_approach, yaw=facing_centre(self._orbit, status.position))
+        if climb == 0.0:
+            return setpoint
+        return replace(setpoint, position=(*setpoint.position[:2], NAN), velocity=(*setpoint.velocity[:2], climb))
+
+    def _orbit_sticks(self, status: VehicleStatus) -> float:
+        """The circle changed by live sticks since they last acted (:func:`stick_adjusted`, over at most
+        :data:`STICK_STEP_MAX_S`); returns the throttle's climb velocity (NED down, m/s; 0 centred or without
+        sticks).  Climbing, the circle's altitude follows the vehicle's, so a centred throttle holds where it is;
+        a circle changed is approached afresh."""
+        orbit, now = self._orbit, status.time_s
+        self._orbit = replace(orbit, sticks_at_s=now)
+        if orbit.sticks_at_s is None or not self._manual_alive(now):
+            return 0.0
+        p, sticks = self.params, self._shaped_sticks()
+        cruise = p["MPC_XY_CRUISE"] if "MPC_XY_CRUISE" in p else PLANNER_DEFAULTS.v_max_xy
+        acceleration = p["MPC_ACC_HOR"] if "MPC_ACC_HOR" in p else PLANNER_DEFAULTS.a_max_xy
+        adjusted = stick_adjusted(orbit, sticks.forward, sticks.right,
+                                  min(max(now - orbit.sticks_at_s, 0.0), STICK_STEP_MAX_S),
+                                  p["MC_ORBIT_RAD_MAX"], cruise, acceleration)
+        climb = stick_climb_velocity(sticks, self._stick_shape())
+        if climb != 0.0:
+            adjusted = replace(adjusted, centre=(*orbit.centre[:2], status.position[2]))
+        if (adjusted.radius, adjusted.centre) != (orbit.radius, orbit.centre):
+            self._orbit_approach = None
+        self._orbit = replace(adjusted, sticks_at_s=now)
+        return climb

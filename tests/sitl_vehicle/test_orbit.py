@@ -1,5 +1,6 @@
 """Orbit mode (MAV_CMD_DO_ORBIT, MAVSDK's do_orbit) as PX4's multicopter orbit flies it: a circle's radius, speed,
-direction, centre, altitude and yaw behaviour; the circle Orbit starts with; the approach from off the circle."""
+direction, centre, altitude and yaw behaviour; the circle Orbit starts with; the approach from off the circle; what
+the sticks change."""
 
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ from sitl_vehicle.orbit import (
     feasible,
     on_circle,
     starting_orbit,
+    stick_adjusted,
 )
 from sitl_vehicle.params import COMMANDER_PARAMS, ParameterStore
 from tests.sitl_vehicle.test_mission import air, status
@@ -141,7 +143,7 @@ def test_a_command_ends_a_failsafes_delay_as_a_mode_choice_does():
     assert not c.failsafe and c._delayed_failsafe is None
 
 
-def test_orbit_is_position_mode_s_sub_mode_flown_without_the_sticks():
+def test_orbit_is_position_mode_s_sub_mode_and_an_auto_mode():
     assert mode_from_custom(3, 1) is FlightMode.ORBIT and mode_from_custom(3, 2) is FlightMode.POSCTL
     assert FlightMode.ORBIT.custom_mode == (3 << 16) | (1 << 24) and not FlightMode.ORBIT.manual
     flags = FlightMode.ORBIT.base_mode_flags
@@ -263,3 +265,71 @@ def test_orbit_mode_is_refused_armed_on_the_ground_in_words():
         assert "not flying (take off first)" in reply.text and c.mode is FlightMode.AUTO_LOITER
     assert c.set_mode(FlightMode.ORBIT, status(0.1)).text == ("Switching to Orbit is currently not possible: not "
                                                               "flying (take off first)")
+
+
+def test_the_sticks_change_the_radius_and_speed_as_px4_s_do():
+    o = Orbit((0.0, 0.0, -2.0), 20.0, 1.0)                              # facing the centre, clockwise
+    assert stick_adjusted(o, 1.0, 0.0, 1.0, 1000.0, 2.0, 3.0).radius == pytest.approx(18.0)   # pitch in: smaller
+    assert stick_adjusted(o, -0.5, 0.0, 1.0, 1000.0, 2.0, 3.0).radius == pytest.approx(21.0)
+    assert stick_adjusted(o, 0.0, 0.5, 1.0, 1000.0, 2.0, 3.0).speed == pytest.approx(2.5)     # roll right: clockwise
+    assert stick_adjusted(o, 0.0, -1.0, 2.0, 1000.0, 2.0, 3.0).speed == pytest.approx(-5.0)   # through a stop
+    assert stick_adjusted(o, 0.0, 1.0, 2.0, 1000.0, 2.0, 3.0).speed == pytest.approx(math.sqrt(40.0))  # 2 m/s²
+    small = stick_adjusted(o, 1.0, 0.0, 19.5, 1000.0, 2.0, 3.0)
+    assert (small.radius, small.speed) == pytest.approx((1.0, 1.0))      # the radius held to 1 m
+    assert stick_adjusted(o, -1.0, 0.0, 10.0, 30.0, 2.0, 3.0).radius == 30.0   # and to MC_ORBIT_RAD_MAX
+    tangent = Orbit((0.0, 0.0, -2.0), 20.0, 1.0, YAW_FRONT_TANGENT)     # nose along the tangent: roll and pitch swap
+    assert stick_adjusted(tangent, 0.0, 1.0, 1.0, 1000.0, 2.0, 3.0).radius == pytest.approx(18.0)
+    assert stick_adjusted(tangent, 1.0, 0.0, 1.0, 1000.0, 2.0, 3.0).speed == pytest.approx(4.0)
+    ccw = commanded_orbit(tangent, 0.0, 1000.0, radius=-20.0, speed=1.0)   # counter-clockwise: the centre on the left
+    assert not ccw.started_clockwise and ccw.speed == -1.0
+    assert stick_adjusted(ccw, 0.0, -1.0, 1.0, 1000.0, 2.0, 3.0).radius == pytest.approx(18.0)
+    assert stick_adjusted(ccw, 1.0, 0.0, 1.0, 1000.0, 2.0, 3.0).speed == pytest.approx(-4.0)
+    turned = stick_adjusted(ccw, -1.0, 0.0, 2.0, 1000.0, 2.0, 3.0)     # slowed through a stop: clockwise now, and
+    assert turned.speed == pytest.approx(5.0) and not turned.started_clockwise   # the sticks keep their sense
+
+
+def test_live_sticks_fly_the_orbit_s_radius_speed_and_altitude():
+    from sitl_vehicle.manual import Sticks
+
+    c = flying()
+    assert c.orbit(air(1.0, 0.0, 10.0, -2.0), radius=10.0, speed=1.0, centre_ne=(0.0, 0.0), down=-2.0).accepted
+    c.update(air(1.1, 0.0, 10.0, -2.0))                                 # no sticks: the circle as commanded
+    c.manual_control(Sticks(pitch=1.0), 1.1)
+    c.update(air(1.3, 0.0, 10.0, -2.0))
+    assert c.orbit_flown.radius == pytest.approx(10.0 - 0.2 * 2.0)      # MPC_XY_CRUISE per second at full stick
+    c.manual_control(Sticks(roll=1.0), 1.3)
+    c.update(air(1.5, 0.0, 9.6, -2.0))
+    assert (c.orbit_flown.radius, c.orbit_flown.speed) == pytest.approx((9.6, 1.0 + 0.2 * 3.0))   # MPC_ACC_HOR
+    c.manual_control(Sticks(throttle=1.0), 1.5)                         # full throttle: climbing at its speed
+    sp = c.update(air(1.6, 0.0, 9.6, -2.5)).setpoint
+    assert math.isnan(sp.position[2]) and sp.velocity[2] == pytest.approx(-3.0)
+    assert c.orbit_flown.centre == (0.0, 0.0, -2.5)                     # the circle climbs with the vehicle
+    c.manual_control(Sticks(), 1.6)                                     # centred: the altitude held where it is
+    sp = c.update(air(1.7, 0.0, 9.6, -2.6)).setpoint
+    assert sp.position[2] == -2.5 and math.isnan(sp.velocity[2]) and c.orbit_flown.radius == pytest.approx(9.6)
+
+
+def test_sticks_over_mavlink_draw_the_circle_in_and_climb_it(make_vehicle):
+    """MANUAL_CONTROL in Orbit, as a ground station's joystick sends it: pitch forward draws the circle in (the
+    ORBIT_EXECUTION_STATUS radius follows), the throttle climbs it, centred sticks hold the circle where they left
+    it, and the vehicle flies that circle."""
+    from tests.sitl_vehicle.test_loopback import take_off
+
+    server, client = make_vehicle()
+    take_off(client)
+    assert orbit_command(client, 5.0, 1.0, 0, 5.0, 0.0, Home().alt_m + 2.0).result == mavlink.MAV_RESULT_ACCEPTED
+    client.stream_sticks(x=1000)
+    assert client.wait_reading(lambda: server.commander.orbit_flown.radius < 3.0, 10)
+    client.stream_sticks(z=1000)
+    assert client.wait_reading(lambda: server.sim.truth.position[2] < -3.0, 10)
+    client.stream_sticks()
+    client.wait_reading(lambda: False, 0.5)
+    orbit = server.commander.orbit_flown
+    assert 1.0 <= orbit.radius < 3.0 and orbit.centre[2] < -3.0     # (how far past depends on the machine's load)
+
+    def on_it(p):
+        return abs(math.dist(p[:2], orbit.centre[:2]) - orbit.radius) < 0.2 and abs(p[2] - orbit.centre[2]) < 0.2
+
+    assert client.wait_reading(lambda: on_it(server.sim.truth.position), 20)
+    assert client.recv("ORBIT_EXECUTION_STATUS", 3).radius == pytest.approx(orbit.radius)
+    assert server.commander.orbit_flown == orbit                        # centred sticks change nothing
