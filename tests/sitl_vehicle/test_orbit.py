@@ -286,6 +286,7 @@ def test_the_sticks_change_the_radius_and_speed_as_px4_s_do():
     assert stick_adjusted(ccw, 1.0, 0.0, 1.0, 1000.0, 2.0, 3.0).speed == pytest.approx(-4.0)
     turned = stick_adjusted(ccw, -1.0, 0.0, 2.0, 1000.0, 2.0, 3.0)     # slowed through a stop: clockwise now, and
     assert turned.speed == pytest.approx(5.0) and not turned.started_clockwise   # the sticks keep their sense
+    assert commanded_orbit(turned, 0.0, 1000.0, radius=20.0).started_clockwise is True   # a command sets it again
 
 
 def test_live_sticks_fly_the_orbit_s_radius_speed_and_altitude():
@@ -333,3 +334,26 @@ def test_sticks_over_mavlink_draw_the_circle_in_and_climb_it(make_vehicle):
     assert client.wait_reading(lambda: on_it(server.sim.truth.position), 20)
     assert client.recv("ORBIT_EXECUTION_STATUS", 3).radius == pytest.approx(orbit.radius)
     assert server.commander.orbit_flown == orbit                        # centred sticks change nothing
+
+
+def test_the_orbit_sticks_follow_the_vehicle_s_parameters_and_lost_sticks_do_nothing():
+    from sitl_vehicle.manual import Sticks
+    from sitl_vehicle.params import ParamSpec
+
+    bound = [ParamSpec("MPC_XY_CRUISE", 4.0, 0.1, 20.0, "m/s", "planned speed"),
+             ParamSpec("MPC_ACC_HOR", 1.0, 0.1, 20.0, "m/s^2", "planned acceleration")]
+    c = Commander(ParameterStore(COMMANDER_PARAMS + bound))
+    assert c.arm(status(0.0)).accepted
+    c.update(air(0.5))
+    c.manual_control(Sticks(pitch=1.0, roll=1.0), 0.9)                  # live sticks as Orbit is entered: no step
+    assert c.orbit(air(1.0, 0.0, 20.0, -2.0), radius=5.0, speed=1.0, centre_ne=(0.0, 0.0), down=-2.0).accepted
+    assert c.update(air(1.0, 0.0, 20.0, -2.0)).setpoint.position == pytest.approx((0.0, 5.0, -2.0))   # approach
+    sp = c.update(air(1.25, 0.0, 19.0, -2.0)).setpoint                  # 0.25 s of full sticks, at the parameters'
+    assert (c.orbit_flown.radius, c.orbit_flown.speed) == pytest.approx((5.0 - 0.25 * 4.0, 1.0 + 0.25 * 1.0))
+    assert sp.position == pytest.approx((0.0, 4.0, -2.0))               # the smaller circle approached afresh
+    c.update(air(2.0, 0.0, 19.0, -2.0))                                 # the sticks not heard for 1.1 s: lost,
+    assert c.mode is FlightMode.AUTO_LOITER                             # the failsafe's Hold
+    assert c.orbit(air(2.1, 0.0, 19.0, -2.0), radius=4.0).accepted       # Orbit again: the lost sticks do nothing
+    c.update(air(2.2, 0.0, 19.0, -2.0))
+    c.update(air(2.7, 0.0, 19.0, -2.0))
+    assert (c.orbit_flown.radius, c.orbit_flown.speed) == pytest.approx((4.0, 1.0))     # (Orbit starts at 1 m/s)
