@@ -364,7 +364,8 @@ class Commander(Failsafes, Navigator, OrbitMode, StickModes):
         if self.mode is FlightMode.AUTO_RTL and not self.landing:
             return Setpoint(position=self._return_target(), yaw=self._hold_yaw)
         if self.mode is FlightMode.AUTO_MISSION and not self.landing and self._climb_requested():
-            return Setpoint(position=self._mission_target, yaw=self._hold_yaw, cruise_speed=self._mission_speed)
+            return Setpoint(position=self._mission_target, yaw=self._mission_yaw(status),
+                            cruise_speed=self._mission_speed)
         if self.mode is FlightMode.ORBIT and self._orbit is not None:
             return self._orbit_setpoint(status)
         if self.mode.manual and self._sticks is not None and (not status.landed or self._climb_requested()

@@ -25,6 +25,8 @@ NAV_TAKEOFF = mavlink.MAV_CMD_NAV_TAKEOFF
 DO_LAND_START = mavlink.MAV_CMD_DO_LAND_START  # marks where the mission's landing begins (flown past in Mission)
 DO_CHANGE_SPEED = mavlink.MAV_CMD_DO_CHANGE_SPEED  # param2: the horizontal speed of the items after it (m/s)
 DO_JUMP = mavlink.MAV_CMD_DO_JUMP  # go on from item param1, param2 times (then on past the jump)
+DO_SET_ROI_LOCATION = mavlink.MAV_CMD_DO_SET_ROI_LOCATION  # face its place from here on (a gimbal would point at it)
+DO_SET_ROI_NONE = mavlink.MAV_CMD_DO_SET_ROI_NONE  # stop facing a region of interest
 SPEED_NO_CHANGE, SPEED_DEFAULT = -1.0, -2.0        # DO_CHANGE_SPEED's param2 for "no change" and "back to default"
 SPEED_TYPES_HORIZONTAL = (0.0, 1.0)                # param1: air speed or ground speed (a multicopter's the same)
 # camera and gimbal items (as MAVSDK's Mission plugin and QGroundControl add them): PX4 hands them to a payload;
@@ -47,14 +49,16 @@ SUPPORTED_COMMANDS = {NAV_WAYPOINT: "NAV_WAYPOINT", NAV_LOITER_UNLIM: "NAV_LOITE
                       NAV_LOITER_TIME: "NAV_LOITER_TIME", NAV_DELAY: "NAV_DELAY",
                       NAV_RETURN_TO_LAUNCH: "NAV_RETURN_TO_LAUNCH", NAV_LAND: "NAV_LAND", NAV_TAKEOFF: "NAV_TAKEOFF",
                       DO_JUMP: "DO_JUMP", DO_LAND_START: "DO_LAND_START", DO_CHANGE_SPEED: "DO_CHANGE_SPEED",
+                      DO_SET_ROI_LOCATION: "DO_SET_ROI_LOCATION", DO_SET_ROI_NONE: "DO_SET_ROI_NONE",
                       **PAYLOAD_COMMANDS}
 # items with nothing to fly to: Mission mode acts on them (or not) and goes on at once
-DO_COMMANDS = (DO_JUMP, DO_LAND_START, DO_CHANGE_SPEED, *PAYLOAD_COMMANDS)
+DO_COMMANDS = (DO_JUMP, DO_LAND_START, DO_CHANGE_SPEED, DO_SET_ROI_LOCATION, DO_SET_ROI_NONE, *PAYLOAD_COMMANDS)
 # items that take the vehicle somewhere (a jump back must pass one, or it would loop without flying)
 FLOWN_COMMANDS = (NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_DELAY, NAV_LAND, NAV_TAKEOFF,
                   NAV_RETURN_TO_LAUNCH)
 # items with no place of their own: they may come in MAV_FRAME_MISSION, the frame of commands, and without altitude
-PLACELESS_COMMANDS = (NAV_DELAY, *DO_COMMANDS)
+# (a region of interest is a place, though nothing to fly to)
+PLACELESS_COMMANDS = (NAV_DELAY, *(command for command in DO_COMMANDS if command != DO_SET_ROI_LOCATION))
 # items that may leave out a place: "here" for a Takeoff or Land, and the placeless ones
 UNPLACED_COMMANDS = (NAV_TAKEOFF, NAV_LAND, NAV_RETURN_TO_LAUNCH, *PLACELESS_COMMANDS)
 # frames: altitude relative to home, or above mean sea level

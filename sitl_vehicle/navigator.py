@@ -20,6 +20,8 @@ from sitl_vehicle.commander_types import ACCEPTED, Reply, VehicleStatus
 from sitl_vehicle.mission import (
     DO_COMMANDS,
     DO_JUMP,
+    DO_SET_ROI_LOCATION,
+    DO_SET_ROI_NONE,
     NAV_DELAY,
     NAV_LAND,
     NAV_RETURN_TO_LAUNCH,
@@ -37,10 +39,13 @@ RTL_DESCEND, RTL_LOITER, RTL_LAND = "descend", "loiter", "land"
 # Mission mode's phases within an item: climb (a Takeoff item, or the climb PX4 adds before a first waypoint
 # when started on the ground), fly to the item, hold there, land; done: holding at the last item
 MIS_CLIMB, MIS_FLY, MIS_HOLD, MIS_LAND, MIS_DONE = "climb", "fly", "hold", "land", "done"
+ROI_NEAR_M = 0.5   # nearer than this to its region of interest (horizontally) the vehicle keeps the heading it has
 
 
 class Navigator:
     """Return's legs and a mission's items, mixed into ``Commander``."""
+
+    _mission_roi: tuple[float, float] | None = None    # the place a DO_SET_ROI_LOCATION set (local north, east)
 
     def set_mission(self, items: list[MissionItem], status: VehicleStatus) -> None:
         """A new mission (uploaded whole; empty clears it). Flying the old one, the vehicle holds instead."""
@@ -48,6 +53,7 @@ class Navigator:
         self.mission_seq = 0
         self._mission_speed = math.nan  # MPC_XY_CRUISE until a DO_CHANGE_SPEED
         self._jumps_done = {}           # DO_JUMP item -> the jumps it made
+        self._mission_roi = None
         self._mission_phase = MIS_DONE
         self._mission_complete = False
         if self.mode is FlightMode.AUTO_MISSION:
@@ -109,6 +115,15 @@ class Navigator:
             self._rtl_leg = RTL_PATH if plan.path else RTL_RETURN
             self._say(mavlink.MAV_SEVERITY_INFO, f"Return: {plan.flying}")
 
+    def _mission_yaw(self, status: VehicleStatus) -> float:
+        """The heading Mission mode flies: towards the region of interest while one is set (as PX4's navigator
+        turns a multicopter to it; within :data:`ROI_NEAR_M` the heading it had), else the items' own."""
+        if self._mission_roi is not None:
+            north, east = self._mission_roi[0] - status.position[0], self._mission_roi[1] - status.position[1]
+            if math.hypot(north, east) > ROI_NEAR_M:
+                self._hold_yaw = math.atan2(east, north)
+        return self._hold_yaw
+
     def _descend_z(self) -> float:
         return max(self._rtl_z, self.home[2] - self.params["RTL_DESCEND_ALT"])  # descending never climbs
 
@@ -164,6 +179,8 @@ class Navigator:
         if item.command in DO_COMMANDS:         # act, then on to the next (the last: the mission is finished)
             if item.speed is not None:
                 self._mission_speed = item.speed
+            if item.command in (DO_SET_ROI_LOCATION, DO_SET_ROI_NONE):
+                self._mission_roi = (item.north, item.east) if item.command == DO_SET_ROI_LOCATION else None
             if item.command == DO_JUMP and self._jumps_done.get(self.mission_seq, 0) < item.jump[1]:
                 self._jumps_done[self.mission_seq] = self._jumps_done.get(self.mission_seq, 0) + 1
                 self._mission_item_reached(status)

@@ -48,7 +48,7 @@ def test_items_convert_to_the_local_frame_and_bad_ones_name_the_fix():
     nan_params = item(3, NAV_WAYPOINT, params=(math.nan,) * 4)  # MAVSDK sends NaN for "default"
     assert nan_params.hold_s == 0.0 and nan_params.acceptance_radius == 0.0 and math.isnan(nan_params.yaw)
     for msg, result, needle in (
-            (item_msg(0, mavlink.MAV_CMD_DO_SET_ROI_LOCATION), mavlink.MAV_MISSION_UNSUPPORTED, "command 195"),
+            (item_msg(0, mavlink.MAV_CMD_CONDITION_DELAY), mavlink.MAV_MISSION_UNSUPPORTED, "command 112"),
             (item_msg(0, mavlink.MAV_CMD_DO_CHANGE_SPEED), mavlink.MAV_MISSION_INVALID_PARAM2,
              r"DO_CHANGE_SPEED's speed \(param2\) is 0.0; send m/s above 0, -1 \(no change\) or -2 \(the default\)"),
             (item_msg(0, NAV_WAYPOINT, frame=mavlink.MAV_FRAME_LOCAL_NED), mavlink.MAV_MISSION_UNSUPPORTED_FRAME,
@@ -155,9 +155,9 @@ def test_mission_upload_download_fly_and_land_over_mavlink(make_vehicle):
 def test_bad_uploads_are_refused_with_the_reason_and_keep_the_old_mission(make_vehicle):
     server, client = make_vehicle()
     assert upload(client, [item_msg(0, NAV_WAYPOINT, north=1.0)]) == mavlink.MAV_MISSION_ACCEPTED
-    bad = [item_msg(0, NAV_WAYPOINT, north=1.0), item_msg(1, mavlink.MAV_CMD_DO_SET_ROI_LOCATION)]
+    bad = [item_msg(0, NAV_WAYPOINT, north=1.0), item_msg(1, mavlink.MAV_CMD_CONDITION_DELAY)]
     assert upload(client, bad) == mavlink.MAV_MISSION_UNSUPPORTED
-    assert "command 195 is not supported" in client.statustext("Mission refused", 3)
+    assert "command 112 is not supported" in client.statustext("Mission refused", 3)
     assert len(server.commander.mission) == 1
     with client.lock:
         client.conn.mav.mission_count_send(1, 1, 1, 7)                 # no such plan type

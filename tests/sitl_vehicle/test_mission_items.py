@@ -15,6 +15,8 @@ from sitl_vehicle.commander import Commander
 from sitl_vehicle.mission import (
     DO_CHANGE_SPEED,
     DO_JUMP,
+    DO_SET_ROI_LOCATION,
+    DO_SET_ROI_NONE,
     NAV_DELAY,
     NAV_LOITER_TIME,
     NAV_LOITER_UNLIM,
@@ -72,6 +74,8 @@ def test_speed_delay_loiter_and_payload_items_are_read_as_px4_reads_them():
     (item_msg(0, NAV_LOITER_TIME, params=(3.0, 0.0, 0.0, 0.0), here=True),
      mavlink.MAV_MISSION_INVALID_PARAM5_X, "NAV_LOITER_TIME needs a latitude and longitude"),
     (item_msg(0, NAV_WAYPOINT, north=1.0, alt=math.nan), mavlink.MAV_MISSION_INVALID_PARAM7, "altitude is nan"),
+    (item_msg(0, DO_SET_ROI_LOCATION, here=True), mavlink.MAV_MISSION_INVALID_PARAM5_X,
+     "DO_SET_ROI_LOCATION needs a latitude and longitude"),                   # a region of interest is a place
 ])
 def test_bad_items_are_refused_with_the_reason(msg, result, text):
     with pytest.raises(MissionError) as info:
@@ -244,3 +248,32 @@ def test_a_mission_with_a_jump_nowhere_is_refused_over_mavlink_and_the_old_one_k
     assert upload(client, [item_msg(0, NAV_WAYPOINT, north=2.0), jump]) == mavlink.MAV_MISSION_INVALID_SEQUENCE
     assert "DO_JUMP to item 7, which the 2-item mission lacks" in client.statustext("Mission refused", 3)
     assert len(server.commander.mission) == 1 and server.commander.mission[0].north == pytest.approx(1.0, abs=0.01)
+
+
+def test_a_region_of_interest_turns_the_vehicle_to_it_until_cleared():
+    """DO_SET_ROI_LOCATION (as QGroundControl plans it, in a global frame) turns the vehicle to face its place for
+    the items after it, the waypoints' own headings overridden; DO_SET_ROI_NONE ends it, the heading kept."""
+    roi = mission_item_from_message(item_msg(1, DO_SET_ROI_LOCATION, north=2.0, east=10.0, alt=0.0), HOME.to_local)
+    assert roi.name == "DO_SET_ROI_LOCATION" and (roi.north, roi.east) == pytest.approx((2.0, 10.0), abs=0.02)
+    none = command_item(3, DO_SET_ROI_NONE, (0.0, 0.0, 0.0, 0.0))
+    c = flying([local_item(0, NAV_WAYPOINT, 2.0, 0.0), roi, local_item(2, NAV_WAYPOINT, 6.0, 0.0, yaw_deg=180.0),
+                none, local_item(4, NAV_WAYPOINT, 8.0, 0.0), local_item(5, NAV_WAYPOINT, 2.0, 10.0)])
+    assert c.update(air(1.0)).setpoint.yaw == 0.0                                  # no region yet: as it was
+    out = c.update(air(2.0, x=2.0))                                               # reached; the region is set
+    assert out.setpoint.position == (6.0, 0.0, -2.0) and out.setpoint.yaw == pytest.approx(math.pi / 2, abs=0.01)
+    facing = c.update(air(3.0, x=4.0, y=1.0)).setpoint.yaw
+    assert facing == pytest.approx(math.atan2(9.0, -2.0), abs=0.01)               # still facing it, not param4
+    out = c.update(air(4.0, x=6.0))                                               # reached; the region cleared
+    assert out.setpoint.position == (8.0, 0.0, -2.0) and out.setpoint.yaw == facing   # the heading kept
+    assert c.update(air(5.0, x=7.0)).setpoint.yaw == facing
+    c.set_mission([local_item(0, NAV_WAYPOINT, 2.0, 0.0), roi, local_item(2, NAV_WAYPOINT, 2.0, 10.0)], air(6.0))
+    assert c.set_mode(FlightMode.AUTO_MISSION, air(6.5)).accepted
+    c.update(air(7.0, x=2.0))
+    assert c.update(air(8.0, x=2.0, y=9.99)).setpoint.yaw == pytest.approx(math.pi / 2, abs=0.01)   # over it: kept
+    c.set_mission([local_item(0, NAV_WAYPOINT, 2.0, 0.0)], air(9.0))             # a new mission: no region
+    from sitl_vehicle.commander_types import VehicleStatus
+
+    turned = VehicleStatus(time_s=9.5, position=(0.0, 0.0, -2.0), velocity=(0.0, 0.0, 0.0), yaw=0.3, armed=True,
+                           landed=False)
+    assert c.set_mode(FlightMode.AUTO_MISSION, turned).accepted
+    assert c.update(air(10.0, x=1.0)).setpoint.yaw == pytest.approx(0.3)
