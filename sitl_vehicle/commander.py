@@ -191,8 +191,7 @@ class Commander(Failsafes, Navigator, OrbitMode, StickModes):
             return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED,
                                 f"Switching to {mode.label} is currently not possible: no manual control input "
                                 "(send MANUAL_CONTROL)")
-        self.failsafe = False
-        self._delayed_failsafe = None  # a mode the pilot chose ends a failsafe's delay: PX4's takeover
+        self._pilot_takes_over()
         self._enter(mode, status)
         return ACCEPTED
 
@@ -236,10 +235,9 @@ class Commander(Failsafes, Navigator, OrbitMode, StickModes):
     def return_to_launch(self, status: VehicleStatus) -> Reply:
         """Return mode: climb to RTL_RETURN_ALT above home (never down), fly home, descend to
         RTL_DESCEND_ALT, hover RTL_LAND_DELAY s, land."""
-        if not self.armed or status.landed:
-            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Return denied: not flying")
-        self.failsafe = False
-        self._delayed_failsafe = None
+        refused = self._refused_unless_flying(status, "Return denied: not flying")
+        if refused is not None:
+            return refused
         self._enter(FlightMode.AUTO_RTL, status)
         return ACCEPTED
 
@@ -248,11 +246,9 @@ class Commander(Failsafes, Navigator, OrbitMode, StickModes):
         """MAV_CMD_DO_REPOSITION (MAVSDK's goto_location), as PX4 flies it: Hold mode, flying to ``target`` (local
         NED; a NaN component keeps the vehicle's own) at ``speed`` (m/s; NaN or not above 0: MPC_XY_CRUISE), facing
         ``yaw`` (rad; NaN: the heading it has), then holding there."""
-        if not self.armed or status.landed:
-            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Reposition denied: not flying (take "
-                                                                         "off first)")
-        self.failsafe = False
-        self._delayed_failsafe = None       # a place the pilot chose ends a failsafe's delay, as a mode does
+        refused = self._refused_unless_flying(status, "Reposition denied: not flying (take off first)")
+        if refused is not None:
+            return refused
         self._enter(FlightMode.AUTO_LOITER, status)
         goal = tuple(t if math.isfinite(t) else here for t, here in zip(target, status.position, strict=True))
         self._hold_target = goal
@@ -483,6 +479,19 @@ class Commander(Failsafes, Navigator, OrbitMode, StickModes):
         self._has_flown = False
         self._landed_since = None
         self._say(mavlink.MAV_SEVERITY_INFO, text)
+
+    def _pilot_takes_over(self) -> None:
+        """A mode or a place the pilot chose ends a failsafe and a failsafe's delay, as PX4's takeover does."""
+        self.failsafe = False
+        self._delayed_failsafe = None
+
+    def _refused_unless_flying(self, status: VehicleStatus, text: str) -> Reply | None:
+        """A command that flies somewhere (Return, a reposition, an orbit) is refused with ``text`` unless the vehicle
+        is armed in the air; in the air the pilot takes over (:meth:`_pilot_takes_over`) and None is returned."""
+        if not self.armed or status.landed:
+            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, text)
+        self._pilot_takes_over()
+        return None
 
     def _refuse(self, result: int, text: str) -> Reply:
         self._say(mavlink.MAV_SEVERITY_CRITICAL, text)

@@ -171,10 +171,9 @@ class OrbitMode:
               centre_ne: tuple[float, float] = (NAN, NAN), down: float = NAN) -> Reply:
         """MAV_CMD_DO_ORBIT (MAVSDK's do_orbit): Orbit mode, on the circle the parameters name (NaN: keep the
         circle flown, or the one Orbit starts with; see :mod:`sitl_vehicle.orbit`)."""
-        if not self.armed or status.landed:
-            return self._refuse(mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Orbit denied: not flying (take off first)")
-        self.failsafe = False
-        self._delayed_failsafe = None
+        refused = self._refused_unless_flying(status, "Orbit denied: not flying (take off first)")
+        if refused is not None:
+            return refused
         if self.mode is not FlightMode.ORBIT:
             self._enter(FlightMode.ORBIT, status)
         self._orbit = commanded_orbit(self._orbit, status.yaw, self.params["MC_ORBIT_RAD_MAX"], radius, speed,
