@@ -255,7 +255,8 @@ def test_a_region_of_interest_turns_the_vehicle_to_it_until_cleared():
     the items after it, the waypoints' own headings overridden; DO_SET_ROI_NONE ends it, the heading kept."""
     roi = mission_item_from_message(item_msg(1, DO_SET_ROI_LOCATION, north=2.0, east=10.0, alt=0.0), HOME.to_local)
     assert roi.name == "DO_SET_ROI_LOCATION" and (roi.north, roi.east) == pytest.approx((2.0, 10.0), abs=0.02)
-    none = command_item(3, DO_SET_ROI_NONE, (0.0, 0.0, 0.0, 0.0))
+    # DO_SET_ROI_NONE sent with a place, which it does not use
+    none = mission_item_from_message(item_msg(3, DO_SET_ROI_NONE, north=6.0, east=-5.0), HOME.to_local)
     c = flying([local_item(0, NAV_WAYPOINT, 2.0, 0.0), roi, local_item(2, NAV_WAYPOINT, 6.0, 0.0, yaw_deg=180.0),
                 none, local_item(4, NAV_WAYPOINT, 8.0, 0.0), local_item(5, NAV_WAYPOINT, 2.0, 10.0)])
     assert c.update(air(1.0)).setpoint.yaw == 0.0                                  # no region yet: as it was
@@ -270,6 +271,7 @@ def test_a_region_of_interest_turns_the_vehicle_to_it_until_cleared():
     assert c.set_mode(FlightMode.AUTO_MISSION, air(6.5)).accepted
     c.update(air(7.0, x=2.0))
     assert c.update(air(8.0, x=2.0, y=9.99)).setpoint.yaw == pytest.approx(math.pi / 2, abs=0.01)   # over it: kept
+    assert c.update(air(8.5, x=0.0, y=10.0)).setpoint.yaw == pytest.approx(0.0, abs=0.01)    # 2 m south: north
     c.set_mission([local_item(0, NAV_WAYPOINT, 2.0, 0.0)], air(9.0))             # a new mission: no region
     from sitl_vehicle.commander_types import VehicleStatus
 
