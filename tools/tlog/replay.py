@@ -87,16 +87,17 @@ def replay(run_dir: Path, flow: str | None = None, detector: str | None = None, 
             # a look's first frame (a search's, or the servo's again after the thickness look): no pair ends on it
             prev = rgb
             continue
+        decision = decisions[step]
         before, now = frames[step - 1].get("position_est"), frames[step].get("position_est")
         moved = math.dist(before, now) if before is not None and now is not None else None
-        blind = decisions.get(step, {}).get("past_the_end", False)
+        blind = decision.get("past_the_end", False)
         p = perceive(prev, rgb, frames[step - 1]["attitude_est"], frames[step]["attitude_est"], camera.K,
                      backend, detect_blind if blind else detect, baseline_m=moved,
                      min_baseline_m=MissionConfig().min_baseline_m, edges=edge_config)
         seen = candidates_in(p.detection, camera.K, frames[step]["attitude_est"], heading)
         used = openings.observe(seen, (0.0, 0.0), None, float(camera.K[0, 0]), camera.width,
                                 camera.height).target_px
-        flown = decisions.get(step, {}).get("centroid_used")
+        flown = decision.get("centroid_used")
         if used is None or flown is None:
             distance = None if used is None and flown is None else math.inf
         else:
